@@ -1,0 +1,1 @@
+"""Forward kinematics, arm-arm signed distance (exact and learned), collision checks."""

@@ -1,0 +1,230 @@
+"""A small, smooth learned signed distance between two arms.
+
+``PairDistanceModel`` maps a joint vector ``q = (q¹, q²)`` (B, n1 + n2) [rad] to the signed
+distance [m] between the two arms' collision geometry. Instead of feeding raw angles to a large
+network (the authors use 10 × 1024 units), it computes keypoints on both arms with forward
+kinematics (link-frame origins and points interpolated between consecutive origins) and feeds
+the pairwise keypoint distances (plus two soft minima of them) to a small SiLU MLP. This makes
+the model periodic in every joint, smooth, cheap, and, because the UR5 symmetry map mirrors
+every joint-frame origin exactly, invariant under that map by construction.
+
+Arm 1 sits at the pair frame's origin, arm 2 at ``base2`` in that frame.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from safetensors.torch import load_file, save_file
+from torch import nn
+
+from nehmo_core.errors import ModelFileError, UnknownNameError
+from nehmo_core.geometry.kinematics import ArmKinematics
+from nehmo_core.robots.loader import load_robot
+from nehmo_core.robots.model import Pose
+
+FORMAT_VERSION = 1
+MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
+
+# Keypoints per robot: link-frame origins, and segments between two links' origins with the
+# number of interior points to place on each.
+KEYPOINTS: dict[str, dict[str, Any]] = {
+    "ur5": {
+        "origins": [
+            "base_link",
+            "shoulder_link",
+            "upper_arm_link",
+            "forearm_link",
+            "wrist_1_link",
+            "wrist_2_link",
+            "wrist_3_link",
+            "ee_link",
+        ],
+        "segments": [("upper_arm_link", "forearm_link", 3), ("forearm_link", "wrist_1_link", 3)],
+    },
+    "kinova_gen3_6dof": {
+        "origins": [
+            "base_link",
+            "shoulder_link",
+            "bicep_link",
+            "forearm_link",
+            "spherical_wrist_1_link",
+            "spherical_wrist_2_link",
+            "bracelet_link",
+            "end_effector_link",
+        ],
+        "segments": [
+            ("shoulder_link", "bicep_link", 1),
+            ("bicep_link", "forearm_link", 3),
+            ("forearm_link", "spherical_wrist_1_link", 2),
+            ("spherical_wrist_1_link", "spherical_wrist_2_link", 1),
+            ("spherical_wrist_2_link", "bracelet_link", 1),
+        ],
+    },
+}
+
+
+@dataclass(frozen=True)
+class DistanceModelConfig:
+    """Everything needed to rebuild a :class:`PairDistanceModel` (stored in its model card)."""
+
+    robot1: str
+    robot2: str
+    base2_xyz: tuple[float, float, float]
+    base2_rpy: tuple[float, float, float]
+    hidden: tuple[int, ...] = (128, 128, 128)
+    softmin_betas: tuple[float, ...] = (20.0, 60.0)
+
+
+class _Keypoints(nn.Module):
+    def __init__(self, robot_name: str, base: Pose) -> None:
+        super().__init__()
+        if robot_name not in KEYPOINTS:
+            raise UnknownNameError("keypoint set", robot_name, KEYPOINTS)
+        spec = KEYPOINTS[robot_name]
+        self.kin = ArmKinematics(load_robot(robot_name), base)
+        self.origins: list[str] = list(spec["origins"])
+        self.segments: list[tuple[str, str, int]] = [tuple(s) for s in spec["segments"]]
+        self.count = len(self.origins) + sum(s[2] for s in self.segments)
+
+    def forward(self, q: torch.Tensor) -> torch.Tensor:
+        tf = self.kin.link_transforms(q)
+        pts = [tf[n][:, :3, 3] for n in self.origins]
+        for a, b, k in self.segments:
+            pa, pb = tf[a][:, :3, 3], tf[b][:, :3, 3]
+            for i in range(1, k + 1):
+                s = i / (k + 1)
+                pts.append((1.0 - s) * pa + s * pb)
+        return torch.stack(pts, dim=1)  # (B, P, 3)
+
+
+class PairDistanceModel(nn.Module):
+    """Learned signed distance [m] between two arms; ``forward(q)`` with q (B, n1 + n2)."""
+
+    def __init__(self, config: DistanceModelConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.r1 = load_robot(config.robot1)
+        self.r2 = load_robot(config.robot2)
+        self.n1, self.n2 = self.r1.dof, self.r2.dof
+        self.kp1 = _Keypoints(config.robot1, Pose())
+        self.kp2 = _Keypoints(config.robot2, Pose(config.base2_xyz, config.base2_rpy))
+        n_feat = self.kp1.count * self.kp2.count + len(config.softmin_betas)
+        self.register_buffer("feat_mean", torch.zeros(n_feat, dtype=torch.float64))
+        self.register_buffer("feat_std", torch.ones(n_feat, dtype=torch.float64))
+        layers: list[nn.Module] = []
+        width = n_feat
+        for h in config.hidden:
+            layers += [nn.Linear(width, h), nn.SiLU()]
+            width = h
+        layers.append(nn.Linear(width, 1))
+        self.mlp = nn.Sequential(*layers).double()
+
+    @property
+    def dof(self) -> int:
+        return self.n1 + self.n2
+
+    def features(self, q: torch.Tensor) -> torch.Tensor:
+        """Raw features (B, F): pairwise keypoint distances [m] and their soft minima."""
+        p1 = self.kp1(q[:, : self.n1])
+        p2 = self.kp2(q[:, self.n1 :])
+        diff = p1[:, :, None, :] - p2[:, None, :, :]
+        dist = torch.sqrt((diff * diff).sum(-1) + 1e-12).flatten(1)
+        soft = [
+            -torch.logsumexp(-beta * dist, dim=1, keepdim=True) / beta
+            for beta in self.config.softmin_betas
+        ]
+        return torch.cat([dist, *soft], dim=1)
+
+    def head(self, features: torch.Tensor) -> torch.Tensor:
+        """The MLP on raw features (B, F) → distance (B,) [m]."""
+        z = (features - self.feat_mean) / self.feat_std
+        return self.mlp(z).squeeze(-1)
+
+    def forward(self, q: torch.Tensor) -> torch.Tensor:
+        return self.head(self.features(q))
+
+    # ---- numpy convenience -------------------------------------------------------------
+    def distance(self, q: np.ndarray) -> np.ndarray:
+        """Batched value: ``q`` (B, n) or (n,) [rad] → distance (B,) or () [m]."""
+        arr = np.asarray(q, dtype=np.float64)
+        with torch.no_grad():
+            out = self(torch.from_numpy(np.atleast_2d(arr))).numpy()
+        return out if arr.ndim == 2 else out[0]
+
+    def distance_and_gradient(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Batched value (B,) [m] and gradient (B, n) [m/rad]; 1-D input gives unbatched output."""
+        arr = np.asarray(q, dtype=np.float64)
+        qt = torch.from_numpy(np.atleast_2d(arr).copy()).requires_grad_(True)
+        d = self(qt)
+        (g,) = torch.autograd.grad(d.sum(), qt)
+        dv, gv = d.detach().numpy(), g.numpy()
+        return (dv, gv) if arr.ndim == 2 else (dv[0], gv[0])
+
+    # ---- persistence ---------------------------------------------------------------------
+    def save(self, path: Path, card: dict[str, Any]) -> None:
+        """Write ``path`` (.safetensors) and ``path.with_suffix('.json')`` (the model card)."""
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tensors = {k: v.detach().contiguous() for k, v in self.state_dict().items()}
+        save_file(tensors, str(path), metadata={"format_version": str(FORMAT_VERSION)})
+        full = {"format_version": FORMAT_VERSION, "config": asdict(self.config), **card}
+        path.with_suffix(".json").write_text(json.dumps(full, indent=2) + "\n")
+
+
+def _config_from_card(card: dict[str, Any]) -> DistanceModelConfig:
+    c = card["config"]
+    return DistanceModelConfig(
+        robot1=c["robot1"],
+        robot2=c["robot2"],
+        base2_xyz=tuple(c["base2_xyz"]),  # type: ignore[arg-type]
+        base2_rpy=tuple(c["base2_rpy"]),  # type: ignore[arg-type]
+        hidden=tuple(c["hidden"]),
+        softmin_betas=tuple(c["softmin_betas"]),
+    )
+
+
+def load_distance_file(path: Path, expect_pair: str | None = None) -> PairDistanceModel:
+    """Load a distance model from ``path`` (.safetensors + .json card); never unpickles."""
+    card_path = path.with_suffix(".json")
+    if not path.exists() or not card_path.exists():
+        raise ModelFileError(f"distance model files not found: {path} and {card_path}")
+    try:
+        card = json.loads(card_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ModelFileError(f"{card_path}: corrupted model card ({exc})") from exc
+    if card.get("format_version") != FORMAT_VERSION:
+        raise ModelFileError(
+            f"{card_path}: format version {card.get('format_version')!r}, "
+            f"this NeHMO reads version {FORMAT_VERSION}"
+        )
+    if expect_pair is not None and card.get("pair") != expect_pair:
+        raise ModelFileError(
+            f"{card_path}: model is for pair {card.get('pair')!r}, not {expect_pair!r}"
+        )
+    model = PairDistanceModel(_config_from_card(card))
+    try:
+        state = load_file(str(path))
+        model.load_state_dict(state)
+    except Exception as exc:  # safetensors raises several types on corrupted files
+        raise ModelFileError(f"{path}: cannot load weights ({exc})") from exc
+    model.eval()
+    return model
+
+
+SHIPPED_DISTANCE_MODELS = ("ur5_ur5", "ur5_kinova")
+
+
+def load_distance_model(pair: str) -> PairDistanceModel:
+    """Load a shipped learned distance: ``load_distance_model("ur5_ur5")``.
+
+    The returned model has ``distance(q)`` and ``distance_and_gradient(q)`` (numpy, batched)
+    and is a torch module (``model(q)``) for use inside value functions.
+    """
+    if pair not in SHIPPED_DISTANCE_MODELS:
+        raise UnknownNameError("distance model", pair, SHIPPED_DISTANCE_MODELS)
+    return load_distance_file(MODELS_DIR / f"distance_{pair}.safetensors", expect_pair=pair)

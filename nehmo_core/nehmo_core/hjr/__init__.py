@@ -1,0 +1,1 @@
+"""Neural Hamilton-Jacobi reachability: HJI systems, value networks, training, ground truth."""

@@ -1,0 +1,17 @@
+"""Robot models (UR5, Kinova Gen3 6-DoF, planar 2-link) and cell layouts."""
+
+from nehmo_core.robots.loader import ROBOT_NAMES, cell_names, load_cell, load_robot
+from nehmo_core.robots.model import ArmSpec, Cell, JointSpec, Pose, RobotModel, wrap_angle
+
+__all__ = [
+    "ROBOT_NAMES",
+    "ArmSpec",
+    "Cell",
+    "JointSpec",
+    "Pose",
+    "RobotModel",
+    "cell_names",
+    "load_cell",
+    "load_robot",
+    "wrap_angle",
+]

@@ -1,0 +1,225 @@
+"""Load robot models and cell layouts by name (no network access needed).
+
+* ``ur5``: the URDF, collision meshes and SRDF of the ``example-robot-data`` package. Its
+  ``package://`` URIs are rewritten into a cached copy (``$NEHMO_CACHE/robots``).
+* ``kinova_gen3_6dof``: the project's own URDF (see its MODEL_CARD.json).
+* ``planar_2link``: the planar arm of the HJR validation study.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib.metadata
+import math
+import os
+import re
+import tempfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError, UnknownNameError
+from nehmo_core.robots.model import ArmSpec, Cell, JointSpec, RobotModel, as_pose
+
+DATA_DIR = Path(__file__).resolve().parent / "data"
+CELLS_DIR = Path(__file__).resolve().parent / "cells"
+
+_ROBOTS: dict[str, dict[str, str]] = {
+    "ur5": {"source": "example-robot-data", "tip": "ee_link"},
+    "kinova_gen3_6dof": {"source": "project", "tip": "end_effector_link"},
+    "planar_2link": {"source": "project", "tip": "tip"},
+}
+ROBOT_NAMES: tuple[str, ...] = tuple(_ROBOTS)
+
+
+def cache_dir() -> Path:
+    """Directory for derived files (rewritten URDFs, datasets, ground truth)."""
+    root = os.environ.get("NEHMO_CACHE") or str(Path.home() / ".cache" / "nehmo")
+    return Path(root)
+
+
+def cell_names() -> tuple[str, ...]:
+    return tuple(sorted(p.stem for p in CELLS_DIR.glob("*.yaml")))
+
+
+def _example_robot_data_share() -> Path:
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError as exc:
+        raise ModelFileError(
+            "the UR5 model needs the 'example-robot-data' package; install the pinned "
+            "requirements (./run does this)"
+        ) from exc
+    for f in dist.files or []:
+        if str(f).endswith("ur_description/urdf/ur5_robot.urdf"):
+            return Path(str(dist.locate_file(f))).parents[3]
+    raise ModelFileError("example-robot-data is installed but ships no ur5_robot.urdf")
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp") as fh:
+        fh.write(text)
+    os.replace(fh.name, path)
+
+
+def _ur5_urdf() -> tuple[Path, Path]:
+    """Return (cached URDF with absolute mesh paths, SRDF) for the UR5."""
+    share = _example_robot_data_share()  # .../share/example-robot-data
+    src = share / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"
+    srdf = share / "robots" / "ur_description" / "srdf" / "ur5.srdf"
+    text = src.read_text()
+    text = text.replace("package://example-robot-data/", f"{share.as_posix()}/")
+    digest = hashlib.sha256(text.encode()).hexdigest()[:12]
+    out = cache_dir() / "robots" / f"ur5_{digest}.urdf"
+    if not out.exists():
+        _atomic_write(out, text)
+    return out, srdf
+
+
+def _parse_srdf(path: Path | None) -> frozenset[frozenset[str]]:
+    if path is None or not path.exists():
+        return frozenset()
+    root = ET.parse(path).getroot()
+    return frozenset(
+        frozenset((e.attrib["link1"], e.attrib["link2"])) for e in root.iter("disable_collisions")
+    )
+
+
+def _check_meshes(urdf: Path, root: ET.Element) -> None:
+    for mesh in root.iter("mesh"):
+        fname = mesh.attrib.get("filename", "")
+        if fname.startswith("package://"):
+            raise ModelFileError(f"{urdf}: unresolved mesh URI {fname!r}")
+        path = Path(fname) if os.path.isabs(fname) else urdf.parent / fname
+        if not path.exists():
+            raise ModelFileError(f"{urdf}: mesh file not found: {path}")
+
+
+def _chain(root: ET.Element, tip: str) -> list[ET.Element]:
+    """Joints from the URDF root to ``tip``, in order."""
+    by_child = {j.find("child").attrib["link"]: j for j in root.findall("joint")}  # type: ignore[union-attr]
+    chain: list[ET.Element] = []
+    link = tip
+    while link in by_child:
+        joint = by_child[link]
+        chain.append(joint)
+        link = joint.find("parent").attrib["link"]  # type: ignore[union-attr]
+    return chain[::-1]
+
+
+def robot_from_urdf(name: str, urdf: Path, tip: str, srdf: Path | None = None) -> RobotModel:
+    """Build a :class:`RobotModel` from a URDF file (serial chain root → ``tip``)."""
+    if not urdf.exists():
+        raise ModelFileError(f"robot description not found: {urdf}")
+    try:
+        root = ET.parse(urdf).getroot()
+    except ET.ParseError as exc:
+        raise ModelFileError(f"{urdf}: not valid URDF XML ({exc})") from exc
+    _check_meshes(urdf, root)
+    chain = _chain(root, tip)
+    if not chain:
+        raise ModelFileError(f"{urdf}: no joint chain leads to link {tip!r}")
+    joints = []
+    for j in chain:
+        kind = j.attrib["type"]
+        if kind == "fixed":
+            continue
+        if kind not in ("revolute", "continuous"):
+            raise ModelFileError(f"{urdf}: joint {j.attrib['name']!r} has unsupported type {kind}")
+        lim = j.find("limit")
+        attrs: dict[str, Any] = lim.attrib if lim is not None else {}
+        vel = float(attrs.get("velocity", math.inf))
+        if kind == "continuous":
+            lower, upper, cont = -math.inf, math.inf, True
+        else:
+            lower, upper = float(attrs["lower"]), float(attrs["upper"])
+            cont = upper - lower >= 2.0 * math.pi - 1e-9
+        joints.append(JointSpec(j.attrib["name"], lower, upper, vel, cont))
+    chain_links = [chain[0].find("parent").attrib["link"]] + [  # type: ignore[union-attr]
+        j.find("child").attrib["link"]  # type: ignore[union-attr]
+        for j in chain
+    ]
+    with_collision = {
+        lk.attrib["name"] for lk in root.findall("link") if lk.find("collision") is not None
+    }
+    links = tuple(lk for lk in chain_links if lk in with_collision)
+    return RobotModel(
+        name=name,
+        urdf_path=urdf,
+        root_link=chain_links[0],
+        tip_link=tip,
+        joints=tuple(joints),
+        links=links,
+        disabled_collision_pairs=_parse_srdf(srdf),
+    )
+
+
+@functools.cache
+def load_robot(name: str) -> RobotModel:
+    """Load a robot model by name (``ur5``, ``kinova_gen3_6dof``, ``planar_2link``)."""
+    if name not in _ROBOTS:
+        raise UnknownNameError("robot", name, ROBOT_NAMES)
+    info = _ROBOTS[name]
+    if info["source"] == "example-robot-data":
+        urdf, srdf = _ur5_urdf()
+        return robot_from_urdf(name, urdf, info["tip"], srdf)
+    folder = DATA_DIR / name
+    srdf_path = folder / f"{name}.srdf"
+    return robot_from_urdf(
+        name, folder / f"{name}.urdf", info["tip"], srdf_path if srdf_path.exists() else None
+    )
+
+
+def _require(mapping: dict[str, Any], key: str, where: str) -> Any:
+    if key not in mapping:
+        raise InvalidValueError(f"{where}.{key}", "is required", None)
+    return mapping[key]
+
+
+def cell_from_dict(data: Any, source: str = "<cell>") -> Cell:
+    """Build a :class:`Cell` from its YAML mapping, checking every field."""
+    if not isinstance(data, dict):
+        raise InvalidValueError(source, "must be a mapping with keys 'name' and 'arms'", data)
+    arms_raw = _require(data, "arms", source)
+    if not isinstance(arms_raw, list) or not arms_raw:
+        raise InvalidValueError(f"{source}.arms", "must be a non-empty list of arms", arms_raw)
+    arms = []
+    for i, a in enumerate(arms_raw):
+        where = f"{source}.arms[{i}]"
+        if not isinstance(a, dict):
+            raise InvalidValueError(where, "must be a mapping with keys id, robot, base", a)
+        arm_id = str(_require(a, "id", where))
+        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", arm_id):
+            raise InvalidValueError(
+                f"{where}.id", "must be a valid ROS name (letter, then letters, digits, _)", arm_id
+            )
+        robot = load_robot(str(_require(a, "robot", where)))
+        base = a.get("base", {}) or {}
+        pose = as_pose(base.get("xyz", [0.0, 0.0, 0.0]), base.get("rpy", [0.0, 0.0, 0.0]))
+        arms.append(ArmSpec(arm_id, robot, pose))
+    ids = [a.arm_id for a in arms]
+    if len(set(ids)) != len(ids):
+        raise InvalidValueError(f"{source}.arms", "must have unique ids", ids)
+    return Cell(str(data.get("name", source)), tuple(arms))
+
+
+def load_cell(name_or_path: str | os.PathLike[str]) -> Cell:
+    """Load a cell layout: a shipped name (``dual_ur5``, ...) or a path to a YAML file."""
+    text = str(name_or_path)
+    if text in cell_names():
+        path = CELLS_DIR / f"{text}.yaml"
+    elif text.endswith((".yaml", ".yml")) or os.sep in text:
+        path = Path(text)
+        if not path.exists():
+            raise ModelFileError(f"cell file not found: {path}")
+    else:
+        raise UnknownNameError("cell", text, cell_names())
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise NehmoError(f"{path}: not valid YAML ({exc})") from exc
+    return cell_from_dict(data, source=str(path.name))

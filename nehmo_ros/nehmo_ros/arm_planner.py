@@ -1,0 +1,20 @@
+"""`arm_planner` node: plans one arm's velocity commands at a fixed rate with `nehmo_core`.
+
+Placeholder: the node is not implemented yet. Running it prints a message and exits with status 2.
+"""
+
+import sys
+from collections.abc import Sequence
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `arm_planner` console script; `argv` is ignored for now."""
+    del argv
+    print(
+        "nehmo_ros arm_planner: not implemented yet; see the README's Limitations", file=sys.stderr
+    )
+    return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
