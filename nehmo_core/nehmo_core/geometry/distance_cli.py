@@ -9,7 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+from nehmo_core.errors import InvalidValueError, ModelFileError
 from nehmo_core.geometry.distance_data import PAIRS, DatasetSpec, generate
+from nehmo_core.geometry.distance_model import MODELS_DIR, load_distance_file
+from nehmo_core.geometry.distance_train import DistanceTrainSettings, evaluate, train
 
 
 def _count(text: str) -> int:
@@ -28,6 +31,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--workers", type=int, default=2)
     g.add_argument("--out", type=Path, required=True, help="output .npz file")
+    t = sub.add_parser("train", help="fit a distance model on a generated dataset")
+    t.add_argument("--pair", choices=sorted(PAIRS), required=True)
+    t.add_argument("--data", type=Path, required=True, help="training .npz from 'generate'")
+    t.add_argument("--test", type=Path, help="held-out .npz (fresh seed) to report accuracy on")
+    t.add_argument("--hidden", type=str, default="128,128,128", help="hidden widths, e.g. 128,128")
+    t.add_argument("--epochs", type=int, default=DistanceTrainSettings.epochs)
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--out", type=Path, help="output .safetensors (default: the shipped model)")
+    e = sub.add_parser("evaluate", help="accuracy of a distance model on a labelled .npz")
+    e.add_argument("--pair", choices=sorted(PAIRS), required=True)
+    e.add_argument("--data", type=Path, required=True)
+    e.add_argument("--model", type=Path, help="model .safetensors (default: the shipped model)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -44,7 +59,51 @@ def run(args: argparse.Namespace) -> int:
             f"(colliding {np.mean(d < 0):.1%}, |d| < 0.1 m {np.mean(np.abs(d) < 0.1):.1%})"
         )
         return 0
+    if args.action == "train":
+        return _train(args)
+    if args.action == "evaluate":
+        path = args.model or MODELS_DIR / f"distance_{args.pair}.safetensors"
+        q, d, _ = load_dataset(args.data)
+        print(json.dumps(evaluate(load_distance_file(path, args.pair), q, d), indent=2))
+        return 0
     raise AssertionError(args.action)
+
+
+def load_dataset(path: Path) -> tuple[np.ndarray, np.ndarray, dict[str, object]]:
+    """Read a dataset written by ``generate`` (plain arrays; no pickled objects)."""
+    if not path.exists():
+        raise ModelFileError(f"dataset not found: {path}")
+    with np.load(path, allow_pickle=False) as f:
+        return f["q"], f["d"], json.loads(str(f["meta"]))
+
+
+def _train(args: argparse.Namespace) -> int:
+    try:
+        hidden = tuple(int(h) for h in args.hidden.split(","))
+    except ValueError:
+        raise InvalidValueError(
+            "--hidden", "must be comma-separated integers", args.hidden
+        ) from None
+    settings = DistanceTrainSettings(hidden=hidden, epochs=args.epochs, seed=args.seed)
+    q, d, meta = load_dataset(args.data)
+    model, summary = train(args.pair, q, d, settings)
+    card: dict[str, object] = {
+        "pair": args.pair,
+        "what": "learned signed distance [m] between the two arms' collision geometry",
+        "inputs": "q = (q_arm1, q_arm2) [rad] in each robot's URDF joint order",
+        "data": {"train": meta, "file": args.data.name},
+        "training": {**settings.__dict__, **summary},
+    }
+    if args.test is not None:
+        qt, dt, meta_t = load_dataset(args.test)
+        card["accuracy_held_out"] = {"data": meta_t, **evaluate(model, qt, dt)}
+    out = args.out or MODELS_DIR / f"distance_{args.pair}.safetensors"
+    model.save(out, card)
+    print(
+        json.dumps({k: card[k] for k in ("training", "accuracy_held_out") if k in card}, indent=2)
+    )
+    print(f"wrote {out} and {out.with_suffix('.json')}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:

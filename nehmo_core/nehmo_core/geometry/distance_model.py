@@ -106,6 +106,9 @@ class _Keypoints(nn.Module):
 class PairDistanceModel(nn.Module):
     """Learned signed distance [m] between two arms; ``forward(q)`` with q (B, n1 + n2)."""
 
+    feat_mean: torch.Tensor  # (F,) feature standardization
+    feat_std: torch.Tensor  # (F,)
+
     def __init__(self, config: DistanceModelConfig) -> None:
         super().__init__()
         self.config = config
@@ -181,8 +184,8 @@ def _config_from_card(card: dict[str, Any]) -> DistanceModelConfig:
     return DistanceModelConfig(
         robot1=c["robot1"],
         robot2=c["robot2"],
-        base2_xyz=tuple(c["base2_xyz"]),  # type: ignore[arg-type]
-        base2_rpy=tuple(c["base2_rpy"]),  # type: ignore[arg-type]
+        base2_xyz=tuple(c["base2_xyz"]),
+        base2_rpy=tuple(c["base2_rpy"]),
         hidden=tuple(c["hidden"]),
         softmin_betas=tuple(c["softmin_betas"]),
     )

@@ -81,8 +81,9 @@ def train(
     model = new_model(pair, settings.hidden)
     feats = compute_features(model, q)
     mean, std = feats.mean(0), feats.std(0).clamp_min(1e-6)
-    model.feat_mean.copy_(mean.double())
-    model.feat_std.copy_(std.double())
+    with torch.no_grad():
+        model.feat_mean.copy_(mean.double())
+        model.feat_std.copy_(std.double())
     z = (feats - mean) / std
     target = torch.from_numpy(np.minimum(d, CUTOFF)).float()
     mlp = model.mlp.float()

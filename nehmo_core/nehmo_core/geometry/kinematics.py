@@ -25,6 +25,14 @@ class _Step:
     q_index: int  # index into the joint vector, -1 for fixed
 
 
+@dataclass(frozen=True)
+class _Constants:
+    T_world_base: torch.Tensor  # (4, 4)
+    T_parent_joint: list[torch.Tensor]  # (4, 4) per step
+    K: list[torch.Tensor | None]  # (3, 3) skew matrix of the axis per revolute step
+    K2: list[torch.Tensor | None]  # K @ K
+
+
 def _skew(axis: torch.Tensor) -> torch.Tensor:
     x, y, z = axis.tolist()
     return torch.tensor([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]], dtype=axis.dtype)
@@ -66,18 +74,31 @@ class ArmKinematics:
         self.root_link = robot.root_link
         self.link_names: tuple[str, ...] = (robot.root_link, *[s.link for s in steps])
         self._K = [(_skew(s.axis) if s.axis is not None else None) for s in steps]
+        self._const_cache: dict[tuple[torch.dtype, torch.device], _Constants] = {}
+
+    def _constants(self, dtype: torch.dtype, device: torch.device) -> _Constants:
+        """The chain's fixed tensors in ``dtype`` on ``device`` (converted once, then cached)."""
+        key = (dtype, device)
+        if key not in self._const_cache:
+            self._const_cache[key] = _Constants(
+                self.T_world_base.to(device=device, dtype=dtype),
+                [s.T_parent_joint.to(device=device, dtype=dtype) for s in self._steps],
+                [None if K is None else K.to(device=device, dtype=dtype) for K in self._K],
+                [None if K is None else (K @ K).to(device=device, dtype=dtype) for K in self._K],
+            )
+        return self._const_cache[key]
 
     def link_transforms(self, q: torch.Tensor) -> dict[str, torch.Tensor]:
         """``T_world_link`` (B, 4, 4) for every link, from joint angles ``q`` (B, dof) [rad]."""
         batch = q.shape[0]
-        T = self.T_world_base.to(q.device).expand(batch, 4, 4)
+        c = self._constants(q.dtype, q.device)
+        T = c.T_world_base.expand(batch, 4, 4)
         out = {self.root_link: T}
         eye = torch.eye(3, dtype=q.dtype, device=q.device)
-        for step, K in zip(self._steps, self._K, strict=True):
-            T = T @ step.T_parent_joint.to(q.device)
-            if K is not None:
+        for step, T_pj, K, K2 in zip(self._steps, c.T_parent_joint, c.K, c.K2, strict=True):
+            T = T @ T_pj
+            if K is not None and K2 is not None:
                 th = q[:, step.q_index].reshape(batch, 1, 1)
-                K2 = K @ K
                 R = eye + torch.sin(th) * K + (1.0 - torch.cos(th)) * K2  # Rodrigues
                 Tj = torch.zeros(batch, 4, 4, dtype=q.dtype, device=q.device)
                 Tj[:, :3, :3] = R

@@ -112,7 +112,13 @@ class CellWorld:
         out = {}
         for name, idx in self._link_index[arm_id].items():
             if idx < 0:
-                pos = pb.getBasePositionAndOrientation(body, physicsClientId=self.client)[0]
+                # PyBullet reports the base's inertial frame; undo its local inertial offset.
+                com_pos, com_orn = pb.getBasePositionAndOrientation(
+                    body, physicsClientId=self.client
+                )
+                local = pb.getDynamicsInfo(body, -1, physicsClientId=self.client)[3:5]
+                inv_pos, inv_orn = pb.invertTransform(local[0], local[1])
+                pos = pb.multiplyTransforms(com_pos, com_orn, inv_pos, inv_orn)[0]
             else:
                 st = pb.getLinkState(
                     body, idx, computeForwardKinematics=True, physicsClientId=self.client

@@ -1,0 +1,109 @@
+"""Benchmark of the shipped learned distances: accuracy against the exact distance on fresh
+samples, and throughput at batch 1 and batch 1024 on one thread.
+
+    ./run python bench/distance_nets.py            # writes bench/results/distance_nets.{json,md}
+
+Fresh samples use seeds the training data never used: 20,000 uniform over the joint box
+(the headline figures) and 20,000 stratified near contact (the boundary figures).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from nehmo_core.geometry.distance_data import (
+    DatasetSpec,
+    exact_distances,
+    generate,
+    uniform_samples,
+)
+from nehmo_core.geometry.distance_model import SHIPPED_DISTANCE_MODELS, load_distance_model
+from nehmo_core.geometry.distance_train import evaluate
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def _throughput(model: torch.nn.Module, dof: int, batch: int, repeats: int) -> dict[str, float]:
+    q = torch.rand(batch, dof, dtype=torch.float64) * 6.0 - 3.0
+    out = {}
+    with torch.no_grad():
+        model(q)
+        t = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            model(q)
+            t.append(time.perf_counter() - t0)
+    out["value_median_s"] = float(np.median(t))
+    qg = q.clone().requires_grad_(True)
+    t = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        d = model(qg)
+        torch.autograd.grad(d.sum(), qg)
+        t.append(time.perf_counter() - t0)
+    out["value_and_grad_median_s"] = float(np.median(t))
+    out["evals_per_s"] = batch / out["value_median_s"]
+    out["evals_with_grad_per_s"] = batch / out["value_and_grad_median_s"]
+    return out
+
+
+def run(n: int, workers: int) -> dict[str, object]:
+    torch.set_num_threads(1)
+    report: dict[str, object] = {"machine": platform.processor() or platform.machine(), "pairs": {}}
+    for pair in SHIPPED_DISTANCE_MODELS:
+        model = load_distance_model(pair)
+        q_u = uniform_samples(pair, n, np.random.default_rng(7_000_001))
+        d_u = exact_distances(pair, q_u, workers, f"{pair} uniform")
+        q_b, d_b = generate(DatasetSpec(pair, 0, n, seed=7_000_002), workers)
+        report["pairs"][pair] = {  # type: ignore[index]
+            "uniform": evaluate(model, q_u, d_u),
+            "near_contact": evaluate(model, q_b, d_b),
+            "batch_1": _throughput(model, model.dof, 1, 300),
+            "batch_1024": _throughput(model, model.dof, 1024, 20),
+        }
+    return report
+
+
+def _markdown(report: dict[str, object]) -> str:
+    lines = [
+        "# Learned arm-arm distance: accuracy and throughput",
+        "",
+        "Accuracy on fresh samples against the exact PyBullet distance; throughput on one thread.",
+        "",
+        "| pair | samples | MAE [cm] | MAE d<10cm [cm] | collision acc. | false-safe | false-unsafe "
+        "| evals/s b=1 | evals/s b=1024 | with grad b=1 |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for pair, r in report["pairs"].items():  # type: ignore[attr-defined]
+        for kind in ("uniform", "near_contact"):
+            a = r[kind]
+            lines.append(
+                f"| {pair} | {kind} ({a['n']}) | {100 * a['mae_m']:.2f} | "
+                f"{100 * a['mae_near_m']:.2f} | {100 * a['collision_accuracy']:.1f} % | "
+                f"{100 * a['false_safe_rate']:.2f} % | {100 * a['false_unsafe_rate']:.2f} % | "
+                f"{r['batch_1']['evals_per_s']:.0f} | {r['batch_1024']['evals_per_s']:.0f} | "
+                f"{r['batch_1']['evals_with_grad_per_s']:.0f} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--samples", type=int, default=20_000)
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+    report = run(args.samples, args.workers)
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "distance_nets.json").write_text(json.dumps(report, indent=2) + "\n")
+    (RESULTS / "distance_nets.md").write_text(_markdown(report))
+    print(_markdown(report))
+
+
+if __name__ == "__main__":
+    main()

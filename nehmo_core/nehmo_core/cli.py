@@ -1,0 +1,51 @@
+"""The ``nehmo`` command: one entry point with a sub-command per job.
+
+Errors derived from :class:`~nehmo_core.errors.NehmoError` are printed as one line
+(``nehmo: error: ...``) with exit code 2, never as a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Callable, Sequence
+
+from nehmo_core.errors import NehmoError
+
+# sub-command: (module, help). Each module provides add_arguments(parser) and run(args) -> int.
+_COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("nehmo_core.demo", "a short simulated dual-UR5 run"),
+    "distance": ("nehmo_core.geometry.distance_cli", "learned arm-arm distance: data, training"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="nehmo", description="NeHMO: safety-aware decentralized multi-arm motion planning"
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, (module, help_text) in _COMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        mod = importlib.import_module(module)
+        mod.add_arguments(p)
+        runner: Callable[[argparse.Namespace], int] = mod.run
+        p.set_defaults(_run=runner)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args))
+    except NehmoError as exc:
+        print(f"nehmo {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"nehmo {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

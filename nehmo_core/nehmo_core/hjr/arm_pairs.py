@@ -1,0 +1,41 @@
+"""The 12-D arm-pair HJI systems: UR5-UR5 and UR5-Kinova Gen3 (6-DoF).
+
+Boundary ``l(x)``: the shipped learned distance of the pair (frozen). Symmetry: the mirror
+joint maps of both robots (``geometry.symmetry``), which leave ``l`` unchanged by construction.
+``X_train``: joint 1 of arm 2 within [−π/2, π/2]; the map sends it to the other half because
+both robots' joint-1 maps are ``q → π − q``. Importing this module registers both systems
+with :func:`nehmo_core.hjr.systems.make_system`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nehmo_core.geometry.distance_data import pair_cell
+from nehmo_core.geometry.distance_model import load_distance_model
+from nehmo_core.geometry.symmetry import robot_mirror_map
+from nehmo_core.hjr.systems import ArmPairSystem, JointInterval, register_system
+
+ARM_PAIRS = ("ur5_ur5", "ur5_kinova")
+
+
+def make_arm_pair_system(pair: str) -> ArmPairSystem:
+    """The HJI system of a shipped arm pair (``ū = d̄ = 0.5`` rad/s, ``T = 0.6`` s)."""
+    cell, a, b = pair_cell(pair)
+    r1, r2 = cell.arm(a).robot, cell.arm(b).robot
+    f = robot_mirror_map(r1.name) + robot_mirror_map(r2.name)
+    # Both joint-1 maps are q → π − q: the halves [−π/2, π/2] and its complement swap.
+    assert f.sign[r1.dof] == -1.0 and np.isclose(f.offset[r1.dof], np.pi)
+    return ArmPairSystem(
+        boundary_fn=load_distance_model(pair).float(),
+        n1=r1.dof,
+        n2=r2.dof,
+        symmetry_sign=np.array(f.sign),
+        symmetry_offset=np.array(f.offset),
+        train_region=JointInterval(joint=r1.dof, low=-np.pi / 2, high=np.pi / 2),
+        system_name=pair,
+    )
+
+
+for _pair in ARM_PAIRS:
+    register_system(_pair, lambda p=_pair: make_arm_pair_system(p))  # type: ignore[misc]

@@ -1,0 +1,1 @@
+"""Simulation: scenario generation and (later) kinematic stepping of a cell."""

@@ -1,0 +1,127 @@
+"""The shipped learned distances: accuracy spot check, smoothness, symmetry, safe loading."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from nehmo_core.errors import ModelFileError, UnknownNameError
+from nehmo_core.geometry.distance_data import exact_distances, pair_cell, uniform_samples
+from nehmo_core.geometry.distance_model import (
+    MODELS_DIR,
+    load_distance_file,
+    load_distance_model,
+)
+from nehmo_core.geometry.symmetry import robot_mirror_map
+
+PAIRS = ["ur5_ur5", "ur5_kinova"]
+
+
+@pytest.mark.parametrize("pair", PAIRS)
+def test_model_card_reports_accuracy(pair: str) -> None:
+    card = json.loads((MODELS_DIR / f"distance_{pair}.json").read_text())
+    acc = card["accuracy_held_out"]
+    assert acc["mae_near_m"] <= 0.015
+    assert acc["false_safe_rate"] <= 0.02
+    assert card["training"]["train_wall_time_s"] > 0
+
+
+@pytest.mark.parametrize("pair", PAIRS)
+def test_agrees_with_exact_distance_near_contact(pair: str) -> None:
+    """A fresh spot check (the full figures come from bench/distance_nets.py)."""
+    model = load_distance_model(pair)
+    q = uniform_samples(pair, 600, np.random.default_rng(123))
+    d = exact_distances(pair, q)
+    pred = model.distance(q)
+    near = d < 0.1
+    assert np.mean(np.abs(pred[near] - d[near])) < 0.025
+    assert np.mean(pred[d < 0] > 0) < 0.05
+
+
+@pytest.mark.parametrize("pair", PAIRS)
+def test_gradient_matches_finite_differences(pair: str) -> None:
+    model = load_distance_model(pair)
+    q = uniform_samples(pair, 8, np.random.default_rng(5))
+    _, grad = model.distance_and_gradient(q)
+    h = 1e-6
+    for j in range(q.shape[1]):
+        e = np.zeros(q.shape[1])
+        e[j] = h
+        fd = (model.distance(q + e) - model.distance(q - e)) / (2 * h)
+        np.testing.assert_allclose(grad[:, j], fd, atol=1e-6, rtol=1e-5)
+
+
+@pytest.mark.parametrize("pair", PAIRS)
+def test_single_and_batched_calls_agree(pair: str) -> None:
+    model = load_distance_model(pair)
+    q = uniform_samples(pair, 4, np.random.default_rng(6))
+    d, g = model.distance_and_gradient(q)
+    d0, g0 = model.distance_and_gradient(q[0])
+    assert np.ndim(d0) == 0 and g0.shape == (q.shape[1],)
+    assert d0 == pytest.approx(d[0]) and model.distance(q[0]) == pytest.approx(d[0])
+    np.testing.assert_allclose(g0, g[0])
+
+
+@pytest.mark.parametrize("pair", PAIRS)
+def test_invariant_under_the_pair_mirror_map(pair: str) -> None:
+    """Keypoints sit on joint-frame origins, which the map mirrors exactly: l(f(x)) = l(x)."""
+    cell, a, b = pair_cell(pair)
+    f = robot_mirror_map(cell.arm(a).robot.name) + robot_mirror_map(cell.arm(b).robot.name)
+    model = load_distance_model(pair)
+    q = uniform_samples(pair, 500, np.random.default_rng(8))
+    np.testing.assert_allclose(model.distance(f.apply(q)), model.distance(q), atol=1e-6)
+
+
+def test_model_is_periodic_in_continuous_joints() -> None:
+    model = load_distance_model("ur5_ur5")
+    q = uniform_samples("ur5_ur5", 20, np.random.default_rng(9))
+    shifted = q + 2 * np.pi * np.array([1, -1, 0, 1, 0, 1, 0, 1, 0, 0, -1, 0])
+    np.testing.assert_allclose(model.distance(shifted), model.distance(q), atol=1e-9)
+
+
+def test_torch_module_differentiable_in_float64() -> None:
+    model = load_distance_model("ur5_ur5")
+    q = torch.from_numpy(uniform_samples("ur5_ur5", 3, np.random.default_rng(1)))
+    q.requires_grad_(True)
+    assert torch.autograd.gradcheck(model, (q,))
+
+
+def test_unknown_model_lists_valid_names() -> None:
+    with pytest.raises(UnknownNameError, match="ur5_kinova"):
+        load_distance_model("ur5_ur10")
+
+
+def _copy_model(tmp_path: Path) -> Path:
+    for suffix in (".safetensors", ".json"):
+        shutil.copy(MODELS_DIR / f"distance_ur5_ur5{suffix}", tmp_path / f"m{suffix}")
+    return tmp_path / "m.safetensors"
+
+
+def test_corrupted_weights_are_rejected(tmp_path: Path) -> None:
+    path = _copy_model(tmp_path)
+    path.write_bytes(path.read_bytes()[:200])
+    with pytest.raises(ModelFileError, match="cannot load weights"):
+        load_distance_file(path)
+
+
+def test_wrong_pair_and_version_are_rejected(tmp_path: Path) -> None:
+    path = _copy_model(tmp_path)
+    with pytest.raises(ModelFileError, match="not 'ur5_kinova'"):
+        load_distance_file(path, expect_pair="ur5_kinova")
+    card = json.loads(path.with_suffix(".json").read_text())
+    card["format_version"] = 99
+    path.with_suffix(".json").write_text(json.dumps(card))
+    with pytest.raises(ModelFileError, match="format version 99"):
+        load_distance_file(path)
+    path.with_suffix(".json").write_text("{not json")
+    with pytest.raises(ModelFileError, match="corrupted model card"):
+        load_distance_file(path)
+
+
+def test_missing_files_are_reported(tmp_path: Path) -> None:
+    with pytest.raises(ModelFileError, match="not found"):
+        load_distance_file(tmp_path / "none.safetensors")

@@ -1,0 +1,140 @@
+"""Training loop: runs, checkpoints, resumes bit-identically, is deterministic, checks input."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from nehmo_core.errors import InvalidValueError, ModelFileError, UnknownNameError
+from nehmo_core.hjr.networks import NetworkSettings
+from nehmo_core.hjr.systems import Air3D, TwoLinkPair
+from nehmo_core.hjr.train import (
+    Schedule,
+    TrainSettings,
+    draw_batch,
+    load_value_function,
+    main,
+    parse_count,
+    train,
+)
+from safetensors.torch import load_file
+
+TINY = TrainSettings(
+    variant="bc+sym",
+    network=NetworkSettings(width=16, hidden_layers=1),
+    samples=20_000,
+    batch_size=1_000,
+    checkpoint_every=5_000,
+    log_every=2,
+)
+
+
+def _weights(run: Path) -> dict[str, torch.Tensor]:
+    return load_file(str(run / "model.safetensors"))
+
+
+def test_tiny_run_writes_files_and_loads(tmp_path: Path) -> None:
+    result = train(Air3D(), TINY, tmp_path / "a", progress=False)
+    assert result.steps == 20 and result.samples == 20_000
+    for name in ("model.safetensors", "model.json", "checkpoint.safetensors", "train_log.csv"):
+        assert (tmp_path / "a" / name).exists()
+    meta = json.loads((tmp_path / "a" / "model.json").read_text())
+    assert meta["system"]["name"] == "air3d" and meta["complete"] and meta["samples"] == 20_000
+    lines = (tmp_path / "a" / "train_log.csv").read_text().splitlines()
+    assert lines[0].startswith("step,samples,tau_max,loss,dirichlet,pde")
+    assert len(lines) == 1 + 10
+    vf = load_value_function(tmp_path / "a")
+    assert vf.variant == "bc+sym"
+    assert np.isfinite(vf.value(1.1, np.zeros((3, 3)))).all()
+
+
+def test_resume_is_identical_to_uninterrupted_run(tmp_path: Path) -> None:
+    train(Air3D(), TINY, tmp_path / "full", progress=False)
+    partial = train(Air3D(), TINY, tmp_path / "resumed", progress=False, stop_after_steps=7)
+    assert partial.steps == 7 and not (tmp_path / "resumed" / "model.json").exists()
+    train(Air3D(), TINY, tmp_path / "resumed", resume=True, progress=False)
+    full, resumed = _weights(tmp_path / "full"), _weights(tmp_path / "resumed")
+    for key in full:
+        assert torch.equal(full[key], resumed[key]), key
+
+    def rows(run: str) -> list[list[str]]:  # every column but the wall time
+        lines = (tmp_path / run / "train_log.csv").read_text().splitlines()
+        return [line.split(",")[:-1] for line in lines]
+
+    assert rows("resumed") == rows("full")
+
+
+def test_deterministic_by_seed(tmp_path: Path) -> None:
+    settings = replace(TINY, variant="bc", samples=6_000)
+    train(TwoLinkPair(), settings, tmp_path / "a", progress=False)
+    train(TwoLinkPair(), settings, tmp_path / "b", progress=False)
+    train(TwoLinkPair(), replace(settings, seed=1), tmp_path / "c", progress=False)
+    a, b, c = _weights(tmp_path / "a"), _weights(tmp_path / "b"), _weights(tmp_path / "c")
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert not all(torch.equal(a[k], c[k]) for k in a)
+
+
+def test_schedule_and_batches() -> None:
+    settings = replace(TINY, samples=10_500, pretrain_fraction=0.2, curriculum_fraction=0.5)
+    schedule = Schedule.from_settings(settings)
+    assert schedule.total_steps == 11 and schedule.pretrain_steps == 2
+    assert schedule.batch_size_at(10) == 500
+    assert schedule.tau_max(1, 1.1) == 0.0
+    assert schedule.tau_max(schedule.pretrain_steps + schedule.curriculum_steps, 1.1) == 1.1
+    system = Air3D()
+    tau, x, mask = draw_batch(system, settings, schedule, 0)
+    assert bool(mask.all()) and float(tau.abs().max()) == 0.0
+    tau, x, mask = draw_batch(system, settings, schedule, 5)
+    assert bool((tau[mask] == 0).all()) and 0.1 < float(mask.double().mean()) < 0.2
+    assert bool(system.in_train(x).all())  # bc+sym folds into X_train
+    tau2, x2, _ = draw_batch(system, settings, schedule, 5)
+    assert torch.equal(x, x2) and torch.equal(tau, tau2)
+
+
+def test_count_parsing() -> None:
+    assert parse_count("40M") == 40_000_000
+    assert parse_count("500k") == 500_000
+    assert parse_count("2e6") == 2_000_000
+    assert parse_count("20000") == 20_000
+    for bad in ("forty", "-3", "0", "1.5"):
+        with pytest.raises(InvalidValueError, match="samples"):
+            parse_count(bad)
+
+
+def test_bad_inputs_raise(tmp_path: Path) -> None:
+    with pytest.raises(UnknownNameError, match="deepreach"):
+        TrainSettings(variant="sym")
+    with pytest.raises(UnknownNameError, match="authors"):
+        TrainSettings.preset("gpu")
+    with pytest.raises(InvalidValueError, match="batch_size"):
+        TrainSettings(batch_size=0)
+    with pytest.raises(InvalidValueError, match="curriculum_fraction"):
+        TrainSettings(curriculum_fraction=0.0)
+    train(Air3D(), replace(TINY, samples=2_000), tmp_path / "run", progress=False)
+    with pytest.raises(InvalidValueError, match="out"):
+        train(Air3D(), replace(TINY, samples=2_000), tmp_path / "run", progress=False)
+    with pytest.raises(ModelFileError, match="settings"):
+        train(Air3D(), replace(TINY, samples=4_000), tmp_path / "run", resume=True, progress=False)
+    with pytest.raises(ModelFileError, match="two_link"):
+        load_value_function(tmp_path / "run", system=TwoLinkPair())
+    (tmp_path / "run" / "model.safetensors").write_bytes(b"not a safetensors file")
+    with pytest.raises(ModelFileError, match="cannot read"):
+        load_value_function(tmp_path / "run")
+    with pytest.raises(ModelFileError, match="missing"):
+        load_value_function(tmp_path / "nothing.safetensors")
+
+
+def test_cli_errors_list_valid_choices(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit):
+        main(["--system", "air4d", "--out", str(tmp_path / "x"), "--no-progress"])
+    assert "air3d" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["--system", "air3d", "--variant", "sym", "--out", str(tmp_path / "x")])
+    assert "bc+sym" in capsys.readouterr().err
+    args = ["--system", "two_link", "--variant", "deepreach", "--samples", "2k", "--width", "8"]
+    assert main([*args, "--batch-size", "1000", "--out", str(tmp_path / "y"), "--no-progress"]) == 0
+    assert load_value_function(tmp_path / "y").variant == "deepreach"

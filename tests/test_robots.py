@@ -1,0 +1,131 @@
+"""Robot models and cell layouts load from the shipped files, and bad input is rejected."""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError, UnknownNameError
+from nehmo_core.robots import ROBOT_NAMES, cell_names, load_cell, load_robot
+from nehmo_core.robots.loader import cell_from_dict, robot_from_urdf
+
+
+def test_ur5_model_from_example_robot_data() -> None:
+    ur5 = load_robot("ur5")
+    assert ur5.dof == 6
+    assert ur5.joint_names[0] == "shoulder_pan_joint"
+    assert ur5.joint_names[-1] == "wrist_3_joint"
+    assert ur5.continuous.all()  # ±2π (elbow ±π): a full turn each
+    assert "package://" not in ur5.urdf_path.read_text()
+    # SRDF pairs are excluded from the self-collision list, adjacent links too.
+    pairs = {frozenset(p) for p in ur5.self_collision_pairs()}
+    assert frozenset(("forearm_link", "wrist_3_link")) not in pairs
+    assert frozenset(("base_link", "forearm_link")) in pairs
+
+
+def test_kinova_model_limits() -> None:
+    kin = load_robot("kinova_gen3_6dof")
+    assert kin.dof == 6
+    assert kin.continuous.tolist() == [True, False, False, True, False, True]
+    np.testing.assert_allclose(kin.upper[[1, 2, 4]], [2.41, 2.66, 2.23])
+    np.testing.assert_allclose(kin.lower[[1, 2, 4]], [-2.41, -2.66, -2.23])
+
+
+def test_planar_two_link() -> None:
+    arm = load_robot("planar_2link")
+    assert arm.dof == 2 and arm.continuous.all()
+
+
+def test_unknown_robot_lists_valid_names() -> None:
+    with pytest.raises(UnknownNameError) as exc:
+        load_robot("ur10")
+    for name in ROBOT_NAMES:
+        assert name in str(exc.value)
+
+
+@pytest.mark.parametrize("name", ["dual_ur5", "triple_ur5", "five_ur5", "ur5_kinova"])
+def test_shipped_cells(name: str) -> None:
+    cell = load_cell(name)
+    assert cell.name == name
+    assert len(set(cell.arm_ids)) == len(cell.arms)
+    # Every arm other than the centre one sits 0.6 m from it and faces it.
+    for arm in cell.arms[1:]:
+        x, y, _ = arm.base.xyz
+        assert math.hypot(x, y) == pytest.approx(0.6)
+        facing = np.array([math.cos(arm.base.yaw), math.sin(arm.base.yaw)])
+        assert facing @ np.array([-x, -y]) / 0.6 == pytest.approx(1.0)
+
+
+def test_cell_counts() -> None:
+    assert [len(load_cell(n).arms) for n in ("dual_ur5", "triple_ur5", "five_ur5")] == [2, 3, 5]
+    assert set(cell_names()) >= {"dual_ur5", "triple_ur5", "five_ur5", "ur5_kinova"}
+
+
+def test_unknown_cell_lists_valid_names() -> None:
+    with pytest.raises(UnknownNameError, match="dual_ur5"):
+        load_cell("quad_ur5")
+    with pytest.raises(UnknownNameError) as exc:
+        load_cell("dual_ur5").arm("ur5_9")
+    assert "ur5_0" in str(exc.value)
+
+
+def test_cell_yaml_errors_name_the_field(tmp_path: Path) -> None:
+    with pytest.raises(InvalidValueError, match=r"arms"):
+        cell_from_dict({"name": "x"})
+    with pytest.raises(InvalidValueError, match=r"arms\[0\]\.robot"):
+        cell_from_dict({"arms": [{"id": "a"}]})
+    with pytest.raises(UnknownNameError, match="ur5"):
+        cell_from_dict({"arms": [{"id": "a", "robot": "ur55"}]})
+    with pytest.raises(InvalidValueError, match="unique"):
+        cell_from_dict({"arms": [{"id": "a", "robot": "ur5"}, {"id": "a", "robot": "ur5"}]})
+    with pytest.raises(InvalidValueError, match="xyz"):
+        cell_from_dict({"arms": [{"id": "a", "robot": "ur5", "base": {"xyz": [0, 0]}}]})
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("arms: [unclosed")
+    with pytest.raises(NehmoError, match="not valid YAML"):
+        load_cell(bad)
+    with pytest.raises(ModelFileError, match="not found"):
+        load_cell(tmp_path / "missing.yaml")
+
+
+def test_joint_vector_checks() -> None:
+    ur5 = load_robot("ur5")
+    with pytest.raises(InvalidValueError, match="must have 6 joint values"):
+        ur5.check_q([0.0] * 5)
+    with pytest.raises(InvalidValueError, match="finite"):
+        ur5.check_q([0.0, float("nan"), 0, 0, 0, 0], "goal")
+    with pytest.raises(InvalidValueError, match="`goal`"):
+        ur5.check_q([0.0] * 7, "goal")
+    kin = load_robot("kinova_gen3_6dof")
+    with pytest.raises(InvalidValueError, match="joint_2"):
+        kin.check_within_limits([0.0, 3.0, 0, 0, 0, 0])
+    assert kin.check_within_limits([10.0, 2.0, 0, 0, 0, 0]).shape == (6,)
+
+
+def test_wrap_only_continuous_joints() -> None:
+    kin = load_robot("kinova_gen3_6dof")
+    q = kin.wrap([4.0, 2.0, -2.5, -4.0, 1.0, 7.0])
+    np.testing.assert_allclose(
+        q, [4.0 - 2 * np.pi, 2.0, -2.5, -4.0 + 2 * np.pi, 1.0, 7.0 - 2 * np.pi]
+    )
+
+
+def test_missing_mesh_is_reported(tmp_path: Path) -> None:
+    ur5 = load_robot("ur5")
+    text = ur5.urdf_path.read_text().replace("collision/forearm.stl", "collision/gone.stl")
+    urdf = tmp_path / "ur5.urdf"
+    urdf.write_text(text)
+    with pytest.raises(ModelFileError, match="gone.stl"):
+        robot_from_urdf("ur5", urdf, "ee_link")
+    with pytest.raises(ModelFileError, match="not found"):
+        robot_from_urdf("ur5", tmp_path / "nope.urdf", "ee_link")
+
+
+def test_relative_mesh_paths_resolve(tmp_path: Path) -> None:
+    kin = load_robot("kinova_gen3_6dof")
+    copy = tmp_path / "k.urdf"
+    shutil.copy(kin.urdf_path, copy)
+    assert robot_from_urdf("k", copy, "end_effector_link").dof == 6
