@@ -76,8 +76,8 @@ def _markdown(report: dict[str, object]) -> str:
         "",
         "Accuracy on fresh samples against the exact PyBullet distance; throughput on one thread.",
         "",
-        "| pair | samples | MAE [cm] | MAE d<10cm [cm] | collision acc. | false-safe | false-unsafe "
-        "| evals/s b=1 | evals/s b=1024 | with grad b=1 |",
+        "| pair | samples | MAE [cm] | MAE d<10cm [cm] | collision acc. | false-safe "
+        "| false-unsafe | evals/s b=1 | evals/s b=1024 | with grad b=1 |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for pair, r in report["pairs"].items():  # type: ignore[attr-defined]

@@ -118,7 +118,7 @@ def test_missing_mesh_is_reported(tmp_path: Path) -> None:
     text = ur5.urdf_path.read_text().replace("collision/forearm.stl", "collision/gone.stl")
     urdf = tmp_path / "ur5.urdf"
     urdf.write_text(text)
-    with pytest.raises(ModelFileError, match="gone.stl"):
+    with pytest.raises(ModelFileError, match=r"gone\.stl"):
         robot_from_urdf("ur5", urdf, "ee_link")
     with pytest.raises(ModelFileError, match="not found"):
         robot_from_urdf("ur5", tmp_path / "nope.urdf", "ee_link")
