@@ -13,10 +13,27 @@ from collections.abc import Callable, Sequence
 
 from nehmo_core.errors import NehmoError
 
-# sub-command: (module, help). Each module provides add_arguments(parser) and run(args) -> int.
-_COMMANDS: dict[str, tuple[str, str]] = {
-    "demo": ("nehmo_core.demo", "a short simulated dual-UR5 run"),
-    "distance": ("nehmo_core.geometry.distance_cli", "learned arm-arm distance: data, training"),
+# sub-command: (module, add-arguments function, run function, help).
+_COMMANDS: dict[str, tuple[str, str, str, str]] = {
+    "demo": ("nehmo_core.demo", "add_arguments", "run", "a short simulated dual-UR5 run"),
+    "distance": (
+        "nehmo_core.geometry.distance_cli",
+        "add_arguments",
+        "run",
+        "learned arm-arm distance: generate data, train, evaluate",
+    ),
+    "train": (
+        "nehmo_core.hjr.train",
+        "add_train_arguments",
+        "run_train",
+        "train a neural HJR value function (deepreach | bc | bc+sym)",
+    ),
+    "validate": (
+        "nehmo_core.hjr.ground_truth",
+        "add_validate_arguments",
+        "run_validate",
+        "compare a value function with the grid ground truth",
+    ),
 }
 
 
@@ -25,11 +42,12 @@ def build_parser() -> argparse.ArgumentParser:
         prog="nehmo", description="NeHMO: safety-aware decentralized multi-arm motion planning"
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name, (module, help_text) in _COMMANDS.items():
+    importlib.import_module("nehmo_core.hjr.arm_pairs")  # registers the UR5 pair systems
+    for name, (module, add_fn, run_fn, help_text) in _COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
         mod = importlib.import_module(module)
-        mod.add_arguments(p)
-        runner: Callable[[argparse.Namespace], int] = mod.run
+        getattr(mod, add_fn)(p)
+        runner: Callable[[argparse.Namespace], int] = getattr(mod, run_fn)
         p.set_defaults(_run=runner)
     return parser
 

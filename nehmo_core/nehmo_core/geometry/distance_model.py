@@ -108,6 +108,7 @@ class PairDistanceModel(nn.Module):
 
     feat_mean: torch.Tensor  # (F,) feature standardization
     feat_std: torch.Tensor  # (F,)
+    output_offset: torch.Tensor  # () [m] conservative calibration, subtracted from the MLP
 
     def __init__(self, config: DistanceModelConfig) -> None:
         super().__init__()
@@ -120,6 +121,7 @@ class PairDistanceModel(nn.Module):
         n_feat = self.kp1.count * self.kp2.count + len(config.softmin_betas)
         self.register_buffer("feat_mean", torch.zeros(n_feat, dtype=torch.float64))
         self.register_buffer("feat_std", torch.ones(n_feat, dtype=torch.float64))
+        self.register_buffer("output_offset", torch.zeros((), dtype=torch.float64))
         layers: list[nn.Module] = []
         width = n_feat
         for h in config.hidden:
@@ -147,7 +149,7 @@ class PairDistanceModel(nn.Module):
     def head(self, features: torch.Tensor) -> torch.Tensor:
         """The MLP on raw features (B, F) → distance (B,) [m]."""
         z = (features - self.feat_mean) / self.feat_std
-        return self.mlp(z).squeeze(-1)
+        return self.mlp(z).squeeze(-1) - self.output_offset
 
     def forward(self, q: torch.Tensor) -> torch.Tensor:
         return self.head(self.features(q))

@@ -28,7 +28,9 @@ class DistanceTrainSettings:
     near_weight: float = 9.0
     near_scale: float = 0.05
     collision_weight: float = 10.0
-    collision_margin: float = 0.005
+    collision_margin: float = 0.01
+    calibration_share: float = 0.05
+    target_false_safe: float = 0.015
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -79,6 +81,11 @@ def train(
     torch.manual_seed(settings.seed)
     t0 = time.perf_counter()
     model = new_model(pair, settings.hidden)
+    # Hold out a calibration split: the output offset is chosen on it, never on test data.
+    order = np.random.default_rng(settings.seed).permutation(len(q))
+    n_cal = int(settings.calibration_share * len(q))
+    q_cal, d_cal = q[order[:n_cal]], d[order[:n_cal]]
+    q, d = q[order[n_cal:]], d[order[n_cal:]]
     feats = compute_features(model, q)
     mean, std = feats.mean(0), feats.std(0).clamp_min(1e-6)
     with torch.no_grad():
@@ -109,7 +116,32 @@ def train(
         bar.set_postfix(loss=f"{last:.3e}")
     model.mlp.double()
     model.eval()
-    return model, {"train_wall_time_s": time.perf_counter() - t0, "final_loss": last}
+    offset = calibrate_offset(model, q_cal, d_cal, settings.target_false_safe)
+    summary = {
+        "train_wall_time_s": time.perf_counter() - t0,
+        "final_loss": last,
+        "output_offset_m": offset,
+        "calibration_samples": n_cal,
+    }
+    return model, summary
+
+
+def calibrate_offset(
+    model: PairDistanceModel, q: np.ndarray, d: np.ndarray, target_false_safe: float
+) -> float:
+    """Smallest offset [m] (0 to 3 cm) whose subtraction brings the share of colliding
+    calibration samples predicted safe (> 0) to ``target_false_safe``; stored in the model."""
+    with torch.no_grad():
+        model.output_offset.zero_()
+        pred = model.head(compute_features(model, q).double()).numpy()
+    colliding = pred[d < 0]
+    offset = 0.0
+    if len(colliding) and np.mean(colliding > 0) > target_false_safe:
+        offset = float(np.quantile(colliding, 1.0 - target_false_safe))
+    offset = min(max(offset, 0.0), 0.03)
+    with torch.no_grad():
+        model.output_offset.fill_(offset)
+    return offset
 
 
 def evaluate(model: PairDistanceModel, q: np.ndarray, d: np.ndarray) -> dict[str, float]:

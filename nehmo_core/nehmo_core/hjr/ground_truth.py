@@ -350,12 +350,17 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--model", required=True, help="run directory or .safetensors file")
     parser.add_argument("--taus", default=None, help="comma-separated times-to-go [s]")
     parser.add_argument("--json", default=None, help="also write the rows to this JSON file")
+    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
 
 
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``nehmo validate`` from parsed arguments; returns the process exit code."""
     from nehmo_core.hjr.train import load_value_function
 
+    if args.threads is not None:
+        if args.threads < 1:
+            raise InvalidValueError("threads", "must be >= 1", args.threads)
+        torch.set_num_threads(args.threads)
     value_function = load_value_function(args.model)
     taus = None
     if args.taus is not None:

@@ -202,6 +202,15 @@ def draw_batch(
     return tau, x, mask
 
 
+def _boundary_and_gradient(network: ValueNetwork, x: Tensor) -> tuple[Tensor, Tensor]:
+    """``(l̂(x), ∇ₓl̂(x))`` without a graph: the boundary function is frozen."""
+    with torch.enable_grad():
+        xl = x.detach().requires_grad_(True)
+        lhat = network.boundary_normalized(xl)
+        (grad,) = torch.autograd.grad(lhat.sum(), xl)
+    return lhat.detach(), grad.detach()
+
+
 def loss_terms(
     network: ValueNetwork,
     settings: TrainSettings,
@@ -218,8 +227,22 @@ def loss_terms(
         return {"loss": settings.dirichlet_weight * dirichlet, "dirichlet": dirichlet, "pde": zero}
     tau = tau.detach().requires_grad_(True)
     x = x.detach().requires_grad_(True)
-    w, residual = network.forward_with_residual(tau, x)
-    dw_dtau, dw_dx = torch.autograd.grad(w.sum(), [tau, x], create_graph=True)
+    if network.variant == "deepreach":
+        w, residual = network.forward_with_residual(tau, x)
+        dw_dtau, dw_dx = torch.autograd.grad(w.sum(), [tau, x], create_graph=True)
+    else:
+        # l is frozen: take l̂ and ∇l̂ once, detached, so the second-order graph (needed for the
+        # PDE term) runs through the SIREN only, not through the boundary network.
+        lhat, dl_dx = _boundary_and_gradient(network, x)
+        nn_out = network.siren(network.network_input(tau, x))
+        dn_dtau, dn_dx = torch.autograd.grad(nn_out.sum(), [tau, x], create_graph=True)
+        if network.variant == "exact":
+            residual = tau * nn_out
+            dw_dtau, dw_dx = nn_out + tau * dn_dtau, dl_dx + tau[:, None] * dn_dx
+        else:
+            residual = nn_out
+            dw_dtau, dw_dx = dn_dtau, dl_dx + dn_dx
+        w = lhat + residual
     hamiltonian = network.system.hamiltonian(x, dw_dx)
     pde = (dw_dtau - hamiltonian.clamp(max=0.0)).abs().mean()
     dirichlet = residual[boundary_mask].abs().mean() if bool(boundary_mask.any()) else zero
