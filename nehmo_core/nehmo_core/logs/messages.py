@@ -294,10 +294,12 @@ def _decode_fields(reader: CdrReader, cls: type[RosMessage]) -> RosMessage:
         if kind == "string":
             values[spec.name] = reader.strings() if spec.sequence else reader.string()
         elif kind in PRIMITIVE_TYPES:
-            raw = reader.primitives(kind) if spec.sequence else reader.primitive(kind)
-            if kind == "byte":
-                raw = [bytes([v]) for v in raw] if spec.sequence else bytes([raw])  # type: ignore[list-item, union-attr]
-            values[spec.name] = raw
+            if spec.sequence:
+                items = reader.primitives(kind)
+                values[spec.name] = [bytes([v]) for v in items] if kind == "byte" else items  # type: ignore[list-item]
+            else:
+                item = reader.primitive(kind)
+                values[spec.name] = bytes([item]) if kind == "byte" else item  # type: ignore[list-item]
         else:
             sub = MESSAGE_TYPES[kind]
             if spec.sequence:
@@ -327,7 +329,7 @@ def deserialize(data: bytes | bytearray | memoryview, msgtype: str) -> RosMessag
 
 def to_dict(msg: RosMessage) -> dict[str, Any]:
     """The message as nested plain dicts and lists (for JSON or comparisons)."""
-    return dataclasses.asdict(msg)  # type: ignore[call-overload, no-any-return]
+    return dataclasses.asdict(msg)  # type: ignore[call-overload]
 
 
 # ------------------------------------------------------------------------------- .msg texts
