@@ -138,8 +138,11 @@ class PairDistanceModel(nn.Module):
         """Raw features (B, F): pairwise keypoint distances [m] and their soft minima."""
         p1 = self.kp1(q[:, : self.n1])
         p2 = self.kp2(q[:, self.n1 :])
-        diff = p1[:, :, None, :] - p2[:, None, :, :]
-        dist = torch.sqrt((diff * diff).sum(-1) + 1e-12).flatten(1)
+        # |a − b|² = |a|² + |b|² − 2 a·b: one small batched product instead of a (B, P1, P2, 3)
+        # difference tensor (several times faster at training batch sizes).
+        sq = (p1 * p1).sum(-1)[:, :, None] + (p2 * p2).sum(-1)[:, None, :]
+        d2 = sq - 2.0 * (p1 @ p2.transpose(1, 2))
+        dist = torch.sqrt(d2.clamp_min(1e-12)).flatten(1)
         soft = [
             -torch.logsumexp(-beta * dist, dim=1, keepdim=True) / beta
             for beta in self.config.softmin_betas

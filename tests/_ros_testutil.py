@@ -1,0 +1,48 @@
+"""Helpers of the ROS runtime tests: a DDS domain per test run, bounded subprocesses."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+PROC = Path(__file__).resolve().parent / "_ros_proc.py"
+
+#: One DDS domain per pytest process, so parallel runs on one machine do not see each other.
+DOMAIN_ID = 100 + os.getpid() % 120
+
+
+def child_env(**extra: str) -> dict[str, str]:
+    """Environment of a child process: this run's domain, the embedded runtime, nehmo_core."""
+    env = dict(os.environ)
+    env["ROS_DOMAIN_ID"] = str(DOMAIN_ID)
+    env["NEHMO_RUNTIME"] = "embedded"
+    env.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
+    env.pop("NEHMO_DDS_CONFIG", None)
+    paths = [str(REPO / "nehmo_core"), str(REPO / "nehmo_ros"), env.get("PYTHONPATH", "")]
+    env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
+    env.update(extra)
+    return env
+
+
+def start(*args: str, **extra_env: str) -> subprocess.Popen[str]:
+    """Start ``tests/_ros_proc.py <args>`` with piped text output."""
+    return subprocess.Popen(
+        [sys.executable, str(PROC), *args],
+        env=child_env(**extra_env),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def finish(proc: subprocess.Popen[str], timeout: float = 20.0) -> tuple[int, str, str]:
+    """Wait for `proc` (killing it after `timeout` seconds); (returncode, stdout, stderr)."""
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+    return proc.returncode, out, err
