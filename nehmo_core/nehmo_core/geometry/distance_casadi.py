@@ -4,16 +4,17 @@
 symbolically: forward kinematics of both arms from the URDF chain (the fixed transforms, joint
 axes and joint indices that :class:`~nehmo_core.geometry.kinematics.ArmKinematics` flattened),
 the keypoints (link-frame origins and points between them), their pairwise distances and soft
-minima, then the SiLU MLP with the model's feature normalization. Weights become constants of
-the graph, so a generated C function carries them. Everything is float64; the graph equals the
-torch model up to rounding (the tests check 1e-9).
+minima, then the SiLU MLP with the model's feature normalization and output offset. Weights
+become constants of the graph, so a generated C function carries them. Everything is float64;
+the graph equals the torch model up to rounding (the tests check 1e-9).
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import casadi as ca
 import numpy as np
-import torch
 from torch import nn
 
 from nehmo_core.errors import NehmoError
@@ -29,10 +30,10 @@ __all__ = [
     "mlp_value_and_gradient",
 ]
 
-_DIST_EPS = 1e-12  # the model's sqrt regularizer [m²]
+_DIST_EPS = 1e-12  # the model's clamp on squared distances [m²]
 
 
-def _numpy(t: torch.Tensor) -> np.ndarray:
+def _numpy(t: Any) -> np.ndarray:
     return t.detach().cpu().double().numpy()
 
 
@@ -71,27 +72,16 @@ def keypoints_expression(keypoints: nn.Module, q: ca.MX) -> ca.MX:
     return ca.horzcat(*pts)
 
 
-def _selection(rows: int, other: int, first: bool) -> ca.DM:
-    """Sparse (rows, rows·other) matrix repeating columns in row-major pair order."""
-    cols = rows * other
-    r, c = [], []
-    for i in range(rows if first else other):
-        for j in range(other if first else rows):
-            r.append(i if first else j)
-            c.append(i * other + j if first else i * rows + j)
-    sp = ca.Sparsity.triplet(rows, cols, r, c)
-    return ca.DM(sp, 1.0)
-
-
 def features_expression(model: PairDistanceModel, q: ca.MX) -> ca.MX:
     """Raw features (F,): pairwise keypoint distances (row-major) [m] and their soft minima."""
     p1 = keypoints_expression(model.kp1, q[: model.n1])  # (3, P)
     p2 = keypoints_expression(model.kp2, q[model.n1 :])  # (3, Q)
     n_p, n_q = p1.shape[1], p2.shape[1]
-    rep1 = ca.mtimes(p1, _selection(n_p, n_q, first=True))  # p1[i] at column i·Q + j
-    rep2 = ca.mtimes(p2, _selection(n_q, n_p, first=False))  # p2[j] at column i·Q + j
-    diff = rep1 - rep2
-    dist = ca.sqrt(ca.sum1(diff * diff) + _DIST_EPS)  # (1, P·Q)
+    # |a − b|² = |a|² + |b|² − 2 a·b, clamped at 1e-12 m², exactly as the torch model computes it
+    # (a feature with a tiny standard deviation amplifies any other rounding of it).
+    sq = ca.repmat(ca.sum1(p1 * p1).T, 1, n_q) + ca.repmat(ca.sum1(p2 * p2), n_p, 1)
+    d2 = sq - 2.0 * ca.mtimes(p1.T, p2)  # (P, Q)
+    dist = ca.sqrt(ca.fmax(ca.reshape(d2.T, 1, n_p * n_q), _DIST_EPS))  # row-major (1, P·Q)
     lowest = ca.mmin(dist)
     soft = [
         lowest - ca.log(ca.sum2(ca.exp(-beta * (dist - lowest)))) / beta
@@ -134,11 +124,11 @@ def mlp_value_and_gradient(mlp: nn.Sequential, z: ca.MX) -> tuple[ca.MX, ca.MX]:
             slopes[-1] = slope
         else:
             raise NehmoError(f"cannot export layer {type(layer).__name__} of a distance MLP")
-    g: ca.MX = ca.MX(ca.DM.ones(1, 1))
-    for layer, slope in zip(reversed(layers), reversed(slopes), strict=True):
-        if slope is not None:
-            g = g * slope
-        g = ca.mtimes(g, ca.DM(_numpy(layer.weight)))
+    g: Any = ca.MX(ca.DM.ones(1, 1))
+    for linear, gain in zip(reversed(layers), reversed(slopes), strict=True):
+        if gain is not None:
+            g = g * gain
+        g = ca.mtimes(g, ca.DM(_numpy(linear.weight)))
     return h, g.T
 
 
@@ -148,6 +138,9 @@ def _distance_graph(model: PairDistanceModel, q: ca.MX) -> tuple[ca.MX, ca.MX]:
     std = ca.DM(_numpy(model.feat_std))
     z = (features - ca.DM(_numpy(model.feat_mean))) / std
     value, grad_z = mlp_value_and_gradient(model.mlp, z)
+    offset = getattr(model, "output_offset", None)  # conservative calibration [m], if any
+    if offset is not None:
+        value = value - float(offset)
     grad_q = ca.jtimes(features, q, grad_z / std, True)  # reverse mode through FK and features
     return value, grad_q
 

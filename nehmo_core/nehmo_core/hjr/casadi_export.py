@@ -19,10 +19,10 @@ torch) become float64 constants, so the graph matches a ``.double()`` copy of th
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import casadi as ca
 import numpy as np
-import torch
 
 from nehmo_core.errors import NehmoError
 from nehmo_core.geometry.distance_casadi import distance_value_and_gradient
@@ -40,7 +40,7 @@ __all__ = [
 ]
 
 
-def _numpy(t: torch.Tensor) -> np.ndarray:
+def _numpy(t: Any) -> np.ndarray:
     return t.detach().cpu().double().numpy()
 
 
@@ -56,7 +56,7 @@ def _wrap_periodic(x: ca.MX, periodic: tuple[bool, ...]) -> ca.MX:
     return ca.vertcat(*rows)
 
 
-def _fold(system: ArmPairSystem, x: ca.MX) -> tuple[ca.MX, ca.MX]:
+def _fold(system: ArmPairSystem, x: ca.MX) -> tuple[ca.MX, Any]:
     """``(x_folded, Df)``: ``x`` if ``x ∈ X_train`` else ``f⁻¹(x)`` (``x`` already wrapped), and
     the diagonal of the fold's Jacobian (1 or the map's sign per coordinate)."""
     region = system.train_region
@@ -86,7 +86,7 @@ def siren_value_and_gradient(siren: Siren, z: ca.MX) -> tuple[ca.MX, ca.MX]:
         slopes.append(siren.omega0 * ca.cos(siren.omega0 * pre))
     out = siren.output
     value = ca.mtimes(h, ca.DM(_numpy(out.weight).T)) + ca.DM(_numpy(out.bias))
-    g: ca.MX = ca.MX(ca.DM(_numpy(out.weight)))  # (1, width)
+    g: Any = ca.MX(ca.DM(_numpy(out.weight)))  # (1, width)
     for layer, slope in zip(reversed(siren.hidden), reversed(slopes), strict=True):
         g = ca.mtimes(g * slope, ca.DM(_numpy(layer.weight)))
     return value, g.T
@@ -97,7 +97,7 @@ def siren_expression(siren: Siren, z: ca.MX) -> ca.MX:
     return siren_value_and_gradient(siren, z)[0]
 
 
-def _network_input(network: ValueNetwork, tau: ca.MX, x: ca.MX) -> tuple[ca.MX, ca.MX]:
+def _network_input(network: ValueNetwork, tau: ca.MX, x: ca.MX) -> tuple[ca.MX, Any]:
     """``(z, ∂z_x/∂x)``: the network input and the (diagonal) scaling of its state part."""
     n = x.shape[0]
     if network.settings.input_scaling == "raw":
@@ -126,7 +126,7 @@ def value_and_gradient_expression(
     if not isinstance(system, ArmPairSystem):
         raise NehmoError(f"CasADi export supports arm-pair systems; got {system.name!r}")
     xs = _wrap_periodic(x, system.periodic)
-    fold_jac = ca.DM.ones(x.shape[0], 1)
+    fold_jac: Any = ca.DM.ones(x.shape[0], 1)
     if network.uses_symmetry:
         xs, fold_jac = _fold(system, xs)
     z, z_scale = _network_input(network, tau, xs)

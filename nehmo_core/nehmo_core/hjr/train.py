@@ -6,7 +6,12 @@ Schedule (a budget of ``samples`` states, pretraining included, in steps of ``ba
 2. The rest with a linear time curriculum ``τ ~ U[0, T·min(1, k/K)]``, ``K`` being
    ``curriculum_fraction`` of the remaining steps; the last ``boundary_fraction`` of every batch
    is forced to ``τ = 0``. Loss ``dirichlet_weight·mean|W − l̂|`` over the ``τ = 0`` points plus
-   ``pde_weight·mean|∂W/∂τ − min(0, H(x, ∇ₓW))|`` over all points. Adam, constant rate.
+   ``pde_weight·mean|∂W/∂τ − min(0, H(x, ∇ₓW))|`` over all points.
+
+Adam with a learning rate that is a pure function of the step (``lr_schedule``): ``constant``;
+``cosine`` from ``learning_rate`` down to ``lr_final_fraction·learning_rate`` over all steps;
+``exponential`` by the same overall factor. Being a function of the step, it needs no state of its
+own and a resumed run sets the same rates.
 
 ``bc+sym`` folds every drawn state into ``X_train`` (``f⁻¹`` is measure preserving, so the batch is
 uniform on ``X_train``); nothing is discarded, so the budget counts the states trained on.
@@ -42,6 +47,7 @@ from nehmo_core.hjr.networks import NetworkSettings, ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import HJISystem, make_system, system_names
 
 __all__ = [
+    "LR_SCHEDULES",
     "PRESETS",
     "TrainResult",
     "TrainSettings",
@@ -59,6 +65,7 @@ CHECKPOINT = "checkpoint"
 MODEL = "model"
 LOG_FILE = "train_log.csv"
 LOG_COLUMNS = ("step", "samples", "tau_max", "loss", "dirichlet", "pde", "wall_s")
+LR_SCHEDULES = ("constant", "cosine", "exponential")
 
 
 @dataclass(frozen=True)
@@ -76,7 +83,9 @@ class TrainSettings:
     boundary_fraction: float = 10 / 65  # share of each curriculum batch forced to τ = 0
     pretrain_fraction: float = 1 / 12  # share of the steps spent at τ = 0
     curriculum_fraction: float = 0.9  # share of the remaining steps over which τ_max grows to T
-    learning_rate: float = 1e-4
+    learning_rate: float = 1e-4  # initial Adam rate
+    lr_schedule: str = "constant"  # one of LR_SCHEDULES
+    lr_final_fraction: float = 0.01  # last step's rate / learning_rate (cosine, exponential)
     dirichlet_weight: float = 40.0
     pde_weight: float = 1.0
     seed: int = 0
@@ -96,6 +105,12 @@ class TrainSettings:
             raise InvalidValueError(
                 "curriculum_fraction", "must lie in (0, 1]", self.curriculum_fraction
             )
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise UnknownNameError("learning-rate schedule", self.lr_schedule, LR_SCHEDULES)
+        if not 0.0 < self.lr_final_fraction <= 1.0:
+            raise InvalidValueError(
+                "lr_final_fraction", "must lie in (0, 1]", self.lr_final_fraction
+            )
         for name in ("dirichlet_weight", "pde_weight"):
             if not getattr(self, name) >= 0:
                 raise InvalidValueError(name, "must be >= 0", getattr(self, name))
@@ -109,6 +124,21 @@ class TrainSettings:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+    def learning_rate_at(self, step: int, total_steps: int) -> float:
+        """Adam rate for ``step`` of ``total_steps`` (``lr_schedule``; a pure function)."""
+        if self.lr_schedule == "constant" or total_steps <= 1:
+            return self.learning_rate
+        progress = min(1.0, step / (total_steps - 1))
+        if self.lr_schedule == "cosine":
+            share = self.lr_final_fraction + (1.0 - self.lr_final_fraction) * 0.5 * (
+                1.0 + math.cos(math.pi * progress)
+            )
+        elif self.lr_schedule == "exponential":
+            share = self.lr_final_fraction**progress
+        else:
+            raise UnknownNameError("learning-rate schedule", self.lr_schedule, LR_SCHEDULES)
+        return self.learning_rate * share
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TrainSettings:
@@ -340,13 +370,40 @@ def _strip_prefix(tensors: dict[str, Tensor], prefix: str) -> dict[str, Tensor]:
     return {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
 
 
-def load_value_function(path: str | Path, system: HJISystem | None = None) -> ValueFunction:
-    """Load a trained value function from a run directory or a ``.safetensors`` file.
+SHIPPED_VALUE_FUNCTIONS: dict[str, tuple[str, ...]] = {
+    "ur5_ur5": ("bc+sym", "bc", "deepreach"),
+    "ur5_kinova": ("bc+sym",),
+}
 
-    A directory loads its ``model.safetensors`` (or, for an unfinished run, its checkpoint).
-    ``system`` must be given for systems that are not registered by name; when given, its name
-    must match the file's. Never unpickles.
+
+def shipped_value_path(name: str, variant: str = "bc+sym") -> Path:
+    """File of a shipped value function: ``models/value_<pair>_<variant>.safetensors``."""
+    if name not in SHIPPED_VALUE_FUNCTIONS:
+        raise UnknownNameError("shipped value function", name, SHIPPED_VALUE_FUNCTIONS)
+    if variant not in SHIPPED_VALUE_FUNCTIONS[name]:
+        raise UnknownNameError(
+            f"variant shipped for {name}", variant, SHIPPED_VALUE_FUNCTIONS[name]
+        )
+    slug = variant.replace("+", "_")
+    return Path(__file__).resolve().parents[1] / "models" / f"value_{name}_{slug}.safetensors"
+
+
+def load_value_function(
+    path: str | Path, system: HJISystem | None = None, variant: str | None = None
+) -> ValueFunction:
+    """Load a trained value function: a shipped one by name, a run directory or a file.
+
+    ``load_value_function("ur5_ur5", variant="bc+sym")`` loads a shipped model (variants per
+    :data:`SHIPPED_VALUE_FUNCTIONS`). A directory loads its ``model.safetensors`` (or, for an
+    unfinished run, its checkpoint). ``system`` must be given for systems that are not
+    registered by name; when given, its name must match the file's. Never unpickles.
     """
+    if isinstance(path, str) and path in SHIPPED_VALUE_FUNCTIONS:
+        import nehmo_core.hjr.arm_pairs  # noqa: F401  (registers the arm-pair systems)
+
+        path = shipped_value_path(path, variant or "bc+sym")
+    elif variant is not None:
+        raise InvalidValueError("variant", "is only used with a shipped model name", variant)
     path = Path(path)
     if path.is_dir():
         model = path / f"{MODEL}.safetensors"
@@ -413,7 +470,9 @@ def _restore(
     optimizer: torch.optim.Optimizer,
 ) -> tuple[int, float]:
     meta = _read_sidecar(out_dir / f"{CHECKPOINT}.json")
-    if meta["settings"] != settings.to_dict():
+    # Compared as settings (not dicts) so a checkpoint from before a field existed, which
+    # therefore ran with that field's default, still resumes.
+    if TrainSettings.from_dict(meta["settings"]) != settings:
         raise ModelFileError(
             f"checkpoint in {out_dir} was written with settings {meta['settings']}, "
             f"not {settings.to_dict()}"
@@ -495,6 +554,8 @@ def _train_step(
     step: int,
 ) -> dict[str, float]:
     tau, x, mask = draw_batch(system, settings, schedule, step)
+    for group in optimizer.param_groups:
+        group["lr"] = settings.learning_rate_at(step, schedule.total_steps)
     terms = loss_terms(network, settings, tau, x, mask, step < schedule.pretrain_steps)
     optimizer.zero_grad(set_to_none=True)
     terms["loss"].backward()
@@ -561,7 +622,9 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--width", type=int, help="SIREN width")
     parser.add_argument("--hidden-layers", type=int, help="SIREN width×width layers")
     parser.add_argument("--batch-size", type=int, help="states per step")
-    parser.add_argument("--lr", type=float, help="Adam learning rate")
+    parser.add_argument("--lr", type=float, help="initial Adam learning rate")
+    parser.add_argument("--lr-schedule", help=f"one of {list(LR_SCHEDULES)}")
+    parser.add_argument("--lr-final", type=float, help="last rate as a share of --lr")
     parser.add_argument("--checkpoint-every", default=None, help="samples between checkpoints")
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -585,6 +648,10 @@ def settings_from_args(args: argparse.Namespace) -> TrainSettings:
         overrides["batch_size"] = args.batch_size
     if args.lr is not None:
         overrides["learning_rate"] = args.lr
+    if args.lr_schedule is not None:
+        overrides["lr_schedule"] = args.lr_schedule
+    if args.lr_final is not None:
+        overrides["lr_final_fraction"] = args.lr_final
     if args.checkpoint_every is not None:
         overrides["checkpoint_every"] = parse_count(args.checkpoint_every, "checkpoint_every")
     return replace(base, **overrides)

@@ -1,0 +1,217 @@
+"""Planning speed of NeHMO on one thread, with CHOMP and the evaluation floor, side by side.
+
+    OMP_NUM_THREADS=1 ./run python bench/planning_speed.py   # writes bench/results/planning_speed.*
+
+For 1, 2 and 4 peers (the dual-UR5 cell, and the centre arm of the three- and five-UR5 cells)
+every arm runs NeHMO on scenarios sampled by the paper's protocol where the naive planner
+collides (so the safety constraints matter), for ``--steps`` steps at 10 Hz. Reported per step
+of the arm with that many peers: median, p95 and max of the plan() wall time, solver statuses
+and fail-safe rate; the time of one batched ``V``/``∇V`` evaluation of all its peers (the floor
+any solver pays at least once per step) and the ratio to it; CHOMP's centralized plan time on the
+same scenarios and its ratio to NeHMO's per-step time; and IPOPT (the authors' solver) per step
+on the dual cell for reference.
+
+Value model: ``bc+sym`` SIREN 3×128 (+ the learned distance, or its proxy while no trained
+weights are shipped) with random weights: speed does not depend on the weights, but the
+constraint's activity does, so the status mix is indicative only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np
+import torch
+from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.planning.chomp import plan_chomp
+from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.synthetic import planning_distance_model, random_value_function
+from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.robots import load_cell
+from nehmo_core.sim.scenarios import Scenario, sample_scenario
+
+RESULTS = Path(__file__).resolve().parent / "results"
+CASES = (("dual_ur5", "ur5_0", 1), ("triple_ur5", "ur5_0", 2), ("five_ur5", "ur5_0", 4))
+
+
+def _naive_collides(world: CellWorld, scenario: Scenario, steps: int) -> bool:
+    q = {a: np.array(v) for a, v in scenario.start.items()}
+    for _ in range(steps):
+        for a in q:
+            q[a] = q[a] + np.clip(scenario.goal[a] - q[a], -0.05, 0.05)
+        world.set_configuration(q)
+        if world.in_collision(self_collision=False):
+            return True
+    return False
+
+
+def _scenarios(cell_name: str, count: int, steps: int) -> list[Scenario]:
+    cell = load_cell(cell_name)
+    out: list[Scenario] = []
+    with CellWorld(cell) as world:
+        seed = 0
+        while len(out) < count and seed < 500:
+            scenario = sample_scenario(cell, np.random.default_rng(seed), world)
+            seed += 1
+            if _naive_collides(world, scenario, steps):
+                out.append(scenario)
+    return out
+
+
+def _episode(cell_name: str, planners: dict[str, Any], scenario: Scenario, steps: int, arm: str):
+    q = {a: np.array(v) for a, v in scenario.start.items()}
+    for p in planners.values():
+        p.reset()
+    times, statuses = [], []
+    for _ in range(steps):
+        commands = {}
+        for a, planner in planners.items():
+            result = planner.plan(q[a], q, scenario.goal[a])
+            commands[a] = result.velocity
+            if a == arm:
+                times.append(result.telemetry.solve_time)
+                statuses.append(result.telemetry.status)
+        q = {a: q[a] + 0.1 * commands[a] for a in q}
+    return times, statuses
+
+
+def _floor(model: PairValueModel, peers: int, repeats: int = 2000) -> float:
+    x = np.random.default_rng(0).uniform(-np.pi, np.pi, size=(peers, model.state_dim))
+    model.evaluate(0.1, x)
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        model.evaluate(0.1, x)
+        samples.append(time.perf_counter() - t0)
+    return float(np.median(samples))
+
+
+def _stats(times: list[float]) -> dict[str, float]:
+    t = np.array(times) * 1e3
+    return {
+        "median_ms": float(np.median(t)),
+        "p95_ms": float(np.percentile(t, 95)),
+        "max_ms": float(t.max()),
+        "mean_ms": float(t.mean()),
+    }
+
+
+def run(scenarios: int, steps: int) -> dict[str, Any]:
+    torch.set_num_threads(1)
+    _, distance_source = planning_distance_model("ur5_ur5")
+    vf = random_value_function("ur5_ur5", "bc+sym")
+    model = PairValueModel.from_value_function(vf, "bench_ur5_ur5_bcsym")
+    report: dict[str, Any] = {
+        "machine": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "load_average_at_start": os.getloadavg(),
+        "threads": torch.get_num_threads(),
+        "value_model": "bc+sym SIREN 3x128, random weights (residual x0.05)",
+        "distance_model": distance_source,
+        "backend": model.backend,
+        "settings": PlannerSettings().to_dict(),
+        "steps_per_scenario": steps,
+        "cases": {},
+    }
+    for cell_name, arm, peers in CASES:
+        cell = load_cell(cell_name)
+        chosen = _scenarios(cell_name, scenarios, 200)
+        planners = {a: NehmoPlanner(cell, a, [model]) for a in cell.arm_ids}
+        assert len(planners[arm].pairs) == peers
+        times: list[float] = []
+        statuses: list[str] = []
+        chomp_times = []
+        for scenario in chosen:
+            t, s = _episode(cell_name, planners, scenario, steps, arm)
+            times += t
+            statuses += s
+            chomp_times.append(plan_chomp(cell, scenario.start, scenario.goal).plan_time)
+        floor = _floor(model, peers)
+        stats = _stats(times)
+        counts = {k: statuses.count(k) for k in sorted(set(statuses))}
+        constrained = [t for t, s in zip(times, statuses, strict=True) if s != "naive"]
+        report["cases"][cell_name] = {
+            "peers": peers,
+            "scenarios": len(chosen),
+            "steps": len(times),
+            "nehmo": stats,
+            "nehmo_constrained_steps": _stats(constrained) if constrained else None,
+            "statuses": counts,
+            "fail_safe_rate": float(np.mean([s not in ("naive", "optimal") for s in statuses])),
+            "p95_over_median": stats["p95_ms"] / stats["median_ms"],
+            "floor_batched_v_grad_ms": floor * 1e3,
+            "median_over_floor": stats["median_ms"] / (floor * 1e3),
+            "chomp_plan_median_s": float(np.median(chomp_times)),
+            "chomp_over_nehmo_step": float(np.median(chomp_times)) / (stats["median_ms"] / 1e3),
+        }
+        print(cell_name, json.dumps(report["cases"][cell_name]))
+    # IPOPT, the authors' solver, on the dual cell for reference
+    cell = load_cell("dual_ur5")
+    ipopt = {
+        a: NehmoPlanner(cell, a, [model], PlannerSettings(solver="ipopt")) for a in cell.arm_ids
+    }
+    scenario = _scenarios("dual_ur5", 1, 200)[0]
+    t, s = _episode("dual_ur5", ipopt, scenario, min(steps, 100), "ur5_0")
+    report["ipopt_dual_one_scenario"] = {**_stats(t), "statuses": {k: s.count(k) for k in set(s)}}
+    return report
+
+
+def markdown(report: dict[str, Any]) -> str:
+    lines = [
+        "# Planning speed (one thread)",
+        "",
+        f"Machine: {report['machine']}, {report['cpu_count']} cores, load average at start "
+        f"{tuple(round(x, 2) for x in report['load_average_at_start'])} (shared with a training "
+        "job). "
+        f"V/∇V backend: {report['backend']}; value model: {report['value_model']}; distance: "
+        f"{report['distance_model']}.",
+        "",
+        "| cell (peers) | steps | median ms | p95 ms | max ms | p95/median | constrained-step "
+        "median / p95 ms | fail-safe | floor ms | median/floor | CHOMP s | CHOMP/NeHMO step |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, c in report["cases"].items():
+        n, k = c["nehmo"], c["nehmo_constrained_steps"]
+        con = f"{k['median_ms']:.2f} / {k['p95_ms']:.2f}" if k else "-"
+        lines.append(
+            f"| {name} ({c['peers']}) | {c['steps']} | {n['median_ms']:.2f} | {n['p95_ms']:.2f} | "
+            f"{n['max_ms']:.1f} | {c['p95_over_median']:.1f} | {con} | {c['fail_safe_rate']:.1%} | "
+            f"{c['floor_batched_v_grad_ms']:.3f} | {c['median_over_floor']:.1f} | "
+            f"{c['chomp_plan_median_s']:.2f} | {c['chomp_over_nehmo_step']:.0f} |"
+        )
+    ip = report["ipopt_dual_one_scenario"]
+    lines += [
+        "",
+        f"IPOPT (authors' settings) on one dual-UR5 scenario: median {ip['median_ms']:.1f} ms, "
+        f"p95 {ip['p95_ms']:.1f} ms per step; statuses {ip['statuses']}.",
+        "",
+        "Statuses per case: "
+        + "; ".join(f"{k}: {c['statuses']}" for k, c in report["cases"].items()),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenarios", type=int, default=4)
+    parser.add_argument("--steps", type=int, default=150)
+    args = parser.parse_args()
+    report = run(args.scenarios, args.steps)
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "planning_speed.json").write_text(json.dumps(report, indent=2) + "\n")
+    (RESULTS / "planning_speed.md").write_text(markdown(report))
+    print(markdown(report))
+
+
+if __name__ == "__main__":
+    main()

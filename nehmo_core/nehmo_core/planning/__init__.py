@@ -1,0 +1,1 @@
+"""Per-arm planning: problem Opt with worst-case peers and a fail-safe, and the baselines."""

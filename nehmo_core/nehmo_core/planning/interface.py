@@ -1,0 +1,82 @@
+"""The planner interface shared by NeHMO, its variants and the baselines.
+
+A planner belongs to one arm of a cell (the cell gives every arm's robot type and base pose).
+Each control tick it is called with the own joint state, the other arms' joint states and the
+own goal, all [rad] in each robot's joint order, and returns a joint-velocity command [rad/s]
+with telemetry. Planners keep no state between calls other than a warm start (and, for the
+trajectory-tracking adapters of centralized planners, the clock of the tracked trajectory).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from nehmo_core.robots.model import Cell, RobotModel
+
+__all__ = ["PlanResult", "Planner", "Telemetry", "check_peers", "goal_error"]
+
+
+@dataclass(frozen=True)
+class Telemetry:
+    """What a planner reports with each command (published on ``/<arm_id>/planner/status``).
+
+    ``status``: ``naive`` (the unconstrained step is safe), ``optimal``, ``unconstrained`` (no
+    peer in range), ``infeasible``, ``iteration_limit``, ``timeout``, ``failed``, or a baseline's
+    own (``naive_planner``, ``reckless``, ``tracking``). ``min_value`` is the smallest
+    ``V(t_plan, x)`` [m] over constrained peers at the current state (``inf`` without peers).
+    """
+
+    solve_time: float  # [s], wall time of the whole plan() call
+    status: str
+    fail_safe: bool = False
+    min_value: float = math.inf
+    min_constraint: float = math.nan  # min V(t_safe, predicted) − ε at the command [m]
+    iterations: int = 0
+    peers_constrained: tuple[str, ...] = ()
+    peers_skipped: tuple[str, ...] = ()  # out of reach
+    peers_unmodelled: tuple[str, ...] = ()  # in reach but no pair model fits: NOT constrained
+    critical_peer: str | None = None
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """A joint-velocity command ``velocity`` (dof,) [rad/s] and its telemetry."""
+
+    velocity: np.ndarray
+    telemetry: Telemetry = field(default_factory=lambda: Telemetry(0.0, "none"))
+
+
+class Planner(Protocol):
+    """One arm's planner: ``plan`` every tick, ``reset`` between episodes."""
+
+    arm_id: str
+
+    def plan(
+        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
+    ) -> PlanResult: ...
+
+    def reset(self) -> None: ...
+
+
+def goal_error(q: np.ndarray, goal: np.ndarray, robot: RobotModel, wrap: bool) -> np.ndarray:
+    """``q − goal`` [rad]; continuous joints wrapped to (−π, π] when ``wrap``."""
+    e = q - goal
+    if wrap:
+        e = robot.wrap(e)
+    return e
+
+
+def check_peers(cell: Cell, arm_id: str, peers: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]:
+    """Validate the other arms' joint states (every arm of the cell but ``arm_id``)."""
+    out = {}
+    for peer_id, q in peers.items():
+        if peer_id == arm_id:
+            continue
+        out[peer_id] = cell.arm(peer_id).robot.check_q(q, f"peers[{peer_id!r}]")
+    return out

@@ -1,0 +1,101 @@
+"""IPOPT through CasADi on Opt: the authors' solver and settings, kept as the reference.
+
+Decision ``u`` [rad/s] (as in the paper, not the step ``y``), cost ``‖q¹ + t_plan·u − q_goal‖²``,
+one constraint ``V_i(t_safe, ·) ≥ ε`` per constrained peer, limited-memory Hessian, ``tol`` and
+``max_iter`` from the settings (1e-3 and 30 by default), started at the warm start. The value
+functions enter as CasADi graphs (``PairValueModel.value``). Any IPOPT status other than
+success is a failure (the planner then uses the fail-safe).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from nehmo_core.planning.opt import OptProblem
+from nehmo_core.planning.sqp import SolveResult
+from nehmo_core.planning.value_model import PairValueModel
+
+__all__ = ["IpoptSolver"]
+
+
+class IpoptSolver:
+    """Builds (and caches) one ``nlpsol`` per constraint layout; ``solve`` mirrors ``solve_sqp``."""
+
+    def __init__(
+        self, tol: float = 1e-3, max_iter: int = 30, max_wall_time: float | None = None
+    ) -> None:
+        self.options: dict[str, Any] = {
+            "ipopt.hessian_approximation": "limited-memory",
+            "ipopt.tol": tol,
+            "ipopt.max_iter": max_iter,
+            "ipopt.print_level": 0,
+            "ipopt.sb": "yes",
+            "print_time": False,
+        }
+        if max_wall_time is not None:
+            self.options["ipopt.max_wall_time"] = max_wall_time
+        self._solvers: dict[tuple[object, ...], ca.Function] = {}
+
+    def _build(
+        self,
+        models: Sequence[PairValueModel],
+        layout: tuple[tuple[int, int], ...],
+        n1: int,
+        t_plan: float,
+        t_safe: float,
+    ) -> ca.Function:
+        u = ca.MX.sym("u", n1)
+        e0 = ca.MX.sym("e0", n1)
+        params = [e0]
+        g = []
+        for index, count in layout:
+            model = models[index]
+            states = ca.MX.sym(f"x{index}", model.state_dim, count)
+            params.append(ca.vec(states))
+            step = ca.vertcat(t_plan * u, ca.DM.zeros(model.n2))
+            for k in range(count):
+                g.append(model.value(t_safe, states[:, k] + step))
+        nlp: dict[str, Any] = {
+            "x": u,
+            "p": ca.vertcat(*params),
+            "f": ca.sumsqr(e0 + t_plan * u),
+            "g": ca.vertcat(*g),
+        }
+        return ca.nlpsol("opt_ipopt", "ipopt", nlp, self.options)
+
+    def solve(
+        self, problem: OptProblem, y_start: np.ndarray, deadline: float = np.inf
+    ) -> SolveResult:
+        """Solve from ``y_start`` (the step; IPOPT starts at ``u = y_start / t_plan``)."""
+        cons = problem.constraints
+        models = cons.models
+        layout = tuple((index, len(states)) for index, states in cons.groups)
+        n1 = len(problem.error0)
+        key = (tuple(id(m) for m in models), layout, n1, problem.t_plan, cons.t_safe)
+        solver = self._solvers.get(key)
+        if solver is None:
+            solver = self._build(models, layout, n1, problem.t_plan, cons.t_safe)
+            self._solvers[key] = solver
+        params = np.concatenate([problem.error0, *[s.T.ravel() for _, s in cons.groups]])
+        u_max = problem.y_max / problem.t_plan
+        u0 = np.clip(np.asarray(y_start) / problem.t_plan, -u_max, u_max)
+        out = solver(x0=u0, p=params, lbx=-u_max, ubx=u_max, lbg=cons.epsilon, ubg=np.inf)
+        stats = solver.stats()
+        y = np.asarray(out["x"]).ravel() * problem.t_plan
+        c = np.asarray(out["g"]).ravel() - cons.epsilon
+        iterations = int(stats.get("iter_count", 0))
+        if time.perf_counter() > deadline:
+            return SolveResult(y, "timeout", iterations, c)
+        if stats.get("success", False):
+            return SolveResult(y, "optimal", iterations, c)
+        status = str(stats.get("return_status", "failed"))
+        if "Infeasible" in status:
+            return SolveResult(y, "infeasible", iterations, c)
+        if "Maximum_Iterations" in status:
+            return SolveResult(y, "iteration_limit", iterations, c)
+        return SolveResult(y, "failed", iterations, c)

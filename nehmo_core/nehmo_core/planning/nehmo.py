@@ -1,0 +1,211 @@
+"""The NeHMO planner of one arm: Algorithm 1 of the paper with problem Opt (DESIGN.md § 3).
+
+Every tick: map each peer in reach into a trained pair model's frame; evaluate ``V`` and ``∇V``
+of all pairs at ``τ = t_plan`` from the current state (one batched call per model); predict each
+peer under its worst case ``dⁱ = −d̄·sign(∂V/∂qⁱ)``; solve Opt; and if the solve fails, is
+infeasible or misses the deadline, apply the fail-safe ``u = ū·sign(∂V/∂q¹)`` of the most
+critical pair (the smallest ``V``), i.e. the HJI optimal control of that pair. Peers out of
+reach are skipped; peers in reach that no model fits are reported as unmodelled (they are not
+constrained, so a caller must treat them as a configuration error or accept the risk).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from nehmo_core.errors import InvalidValueError
+from nehmo_core.planning.interface import PlanResult, Telemetry, check_peers, goal_error
+from nehmo_core.planning.ipopt_solver import IpoptSolver
+from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
+from nehmo_core.planning.pair_frame import PairMapping, arm_reach, match_pair
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.sqp import SolveResult, solve_sqp
+from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.robots.model import Cell
+
+__all__ = ["NehmoPlanner", "OptSolver", "SqpSolver", "make_solver"]
+
+
+class OptSolver(Protocol):
+    """Solves one Opt problem from a warm start before ``deadline`` (a perf_counter instant)."""
+
+    def __call__(
+        self, problem: OptProblem, y_start: np.ndarray, deadline: float
+    ) -> SolveResult: ...
+
+
+@dataclass(frozen=True)
+class SqpSolver:
+    """:func:`solve_sqp` with fixed tolerance and iteration limit."""
+
+    tol: float = 1e-7
+    max_iter: int = 30
+
+    def __call__(self, problem: OptProblem, y_start: np.ndarray, deadline: float) -> SolveResult:
+        return solve_sqp(problem, y_start, self.tol, self.max_iter, deadline)
+
+
+def make_solver(settings: PlannerSettings) -> OptSolver:
+    """The solver named by ``settings.solver``."""
+    if settings.solver == "ipopt":
+        return IpoptSolver(settings.ipopt_tol, settings.ipopt_max_iter, settings.deadline).solve
+    return SqpSolver(settings.sqp_tol, settings.sqp_max_iter)
+
+
+@dataclass(frozen=True)
+class _Peers:
+    """One tick's constrained peers: current pair states, values and gradients."""
+
+    ids: list[str]
+    model_index: list[int]
+    states: list[np.ndarray]  # (n_i,) current pair state per peer
+    values: np.ndarray  # (k,) V(t_plan, x) [m]
+    grads: list[np.ndarray]  # (n_i,) ∇ₓV per peer
+
+
+class NehmoPlanner:
+    """NeHMO (or Opt + any pair value model) for arm ``arm_id`` of ``cell``."""
+
+    def __init__(
+        self,
+        cell: Cell,
+        arm_id: str,
+        models: Sequence[PairValueModel],
+        settings: PlannerSettings | None = None,
+        solver: OptSolver | None = None,
+    ) -> None:
+        self.cell = cell
+        self.arm_id = arm_id
+        self.arm = cell.arm(arm_id)
+        self.robot = self.arm.robot
+        self.settings = settings or PlannerSettings()
+        self.models = list(models)
+        for model in self.models:
+            if not self.settings.t_safe <= model.horizon + 1e-9:
+                raise InvalidValueError(
+                    "t_safe",
+                    f"must be <= the horizon of model {model.name!r} ({model.horizon})",
+                    self.settings.t_safe,
+                )
+        self.solver = solver or make_solver(self.settings)
+        self.pairs: dict[str, PairMapping] = {}
+        skipped, unmodelled = [], []
+        geometry = [(m.robot1, m.robot2, m.base2) for m in self.models]
+        for peer in cell.arms:
+            if peer.arm_id == arm_id:
+                continue
+            gap = np.linalg.norm(np.subtract(peer.base.xyz, self.arm.base.xyz))
+            reach = arm_reach(self.robot.name) + arm_reach(peer.robot.name)
+            if gap > reach + self.settings.reach_margin:
+                skipped.append(peer.arm_id)
+                continue
+            mapping = match_pair(self.arm, peer, geometry)
+            if mapping is None:
+                unmodelled.append(peer.arm_id)
+            else:
+                self.pairs[peer.arm_id] = mapping
+        self.peers_skipped = tuple(skipped)
+        self.peers_unmodelled = tuple(unmodelled)
+        self._warm = np.zeros(self.robot.dof)
+
+    def reset(self) -> None:
+        self._warm = np.zeros(self.robot.dof)
+
+    # -- one tick -----------------------------------------------------------------------------
+    def _current(self, q: np.ndarray, peers: Mapping[str, np.ndarray]) -> _Peers:
+        ids = list(self.pairs)
+        index = [self.pairs[p].model_index for p in ids]
+        states = [self.pairs[p].state(q, peers[p]) for p in ids]
+        values = np.empty(len(ids))
+        grads: list[np.ndarray] = [np.empty(0)] * len(ids)
+        for m in sorted(set(index)):
+            rows = [i for i, mi in enumerate(index) if mi == m]
+            v, g = self.models[m].evaluate(
+                self.settings.t_plan, np.array([states[i] for i in rows])
+            )
+            for k, i in enumerate(rows):
+                values[i], grads[i] = v[k], g[k]
+        return _Peers(ids, index, states, values, grads)
+
+    def _problem(self, error0: np.ndarray, now: _Peers) -> OptProblem:
+        s, n1 = self.settings, self.robot.dof
+        groups = []
+        for m in sorted(set(now.model_index)):
+            rows = [i for i, mi in enumerate(now.model_index) if mi == m]
+            predicted = np.array([now.states[i] for i in rows])
+            peer_grads = np.array([now.grads[i][n1:] for i in rows])
+            predicted[:, n1:] += s.t_plan * worst_case_disturbance(peer_grads, s.d_max)
+            groups.append((m, predicted))
+        constraints = Constraints(self.models, groups, s.t_safe, s.epsilon)
+        return OptProblem(error0, s.t_plan * s.u_max, s.t_plan, constraints)
+
+    def _fail_safe(self, now: _Peers) -> np.ndarray:
+        critical = int(np.argmin(now.values))
+        return self.settings.u_max * np.sign(now.grads[critical][: self.robot.dof])
+
+    def plan(
+        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
+    ) -> PlanResult:
+        start = time.perf_counter()
+        deadline = start + self.settings.deadline
+        q = self.robot.check_q(q_self, "q_self")
+        goal = self.robot.check_q(q_goal, "q_goal")
+        others = check_peers(self.cell, self.arm_id, peers)
+        missing = [p for p in self.pairs if p not in others]
+        if missing:
+            raise InvalidValueError(
+                "peers", f"must include every constrained arm {missing}", list(others)
+            )
+        error0 = goal_error(q, goal, self.robot, self.settings.wrap_goal)
+        info: dict[str, Any] = {
+            "peers_constrained": tuple(self.pairs),
+            "peers_skipped": self.peers_skipped,
+            "peers_unmodelled": self.peers_unmodelled,
+        }
+        if not self.pairs:
+            y = np.clip(
+                -error0,
+                -self.settings.t_plan * self.settings.u_max,
+                self.settings.t_plan * self.settings.u_max,
+            )
+            u = y / self.settings.t_plan
+            self._warm = y
+            return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
+        now = self._current(q, others)
+        problem = self._problem(error0, now)
+        try:
+            result = self.solver(problem, self._warm, deadline)
+            status = result.status
+        except Exception as exc:  # any solver crash must end in the fail-safe
+            result, status = None, f"failed ({type(exc).__name__})"
+        late = time.perf_counter() > deadline
+        if late and result is not None and result.success:
+            status = "timeout"
+        critical = now.ids[int(np.argmin(now.values))]
+        if result is not None and result.success and not late:
+            u = problem.velocity(result.y)
+            self._warm = result.y
+            min_constraint = float(result.constraint.min()) if len(result.constraint) else math.nan
+            fail_safe = False
+        else:
+            u = self._fail_safe(now)
+            self._warm = problem.t_plan * u
+            min_constraint, fail_safe = math.nan, True
+        telemetry = Telemetry(
+            solve_time=time.perf_counter() - start,
+            status=status,
+            fail_safe=fail_safe,
+            min_value=float(now.values.min()),
+            min_constraint=min_constraint,
+            iterations=result.iterations if result is not None else 0,
+            critical_peer=critical,
+            **info,
+        )
+        return PlanResult(u, telemetry)

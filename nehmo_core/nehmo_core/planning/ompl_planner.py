@@ -1,0 +1,136 @@
+"""OMPL RRT-Connect over the composite joint space of all arms: a centralized sampling peer.
+
+The state is every arm's joint vector stacked in the cell's arm order, bounded per joint by
+``(−π, π]`` on continuous joints and the joint limits otherwise (start and goal are wrapped
+into that box). A PyBullet :class:`~nehmo_core.geometry.pybullet_world.CellWorld` checks each
+state exactly (arm-arm and self collisions). Settings follow the expert planner of Ha et al.
+(REFERENCE_NOTES § B): 0.1 rad steps, shortcutting, a time limit instead of an iteration count.
+The Python validity callback is the bottleneck (a few thousand checks per second).
+
+Needs the PyPI ``ompl`` package (2.0.1); it is imported on first use.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from nehmo_core.errors import InvalidValueError, NehmoError
+from nehmo_core.geometry.distance_data import sampling_box
+from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.robots.model import Cell
+
+__all__ = ["OmplResult", "OmplSettings", "plan_rrt_connect"]
+
+
+@dataclass(frozen=True)
+class OmplSettings:
+    time_limit: float = 30.0  # [s]
+    step: float = 0.1  # RRT-Connect range [rad]
+    check_step: float = 0.05  # motion validity checked every this many rad (L2 in joint space)
+    simplify: bool = True  # shortcutting and smoothing of the solution path
+    seed: int | None = 0
+
+    def __post_init__(self) -> None:
+        for name in ("time_limit", "step", "check_step"):
+            if not getattr(self, name) > 0:
+                raise InvalidValueError(name, "must be > 0", getattr(self, name))
+
+
+@dataclass(frozen=True)
+class OmplResult:
+    waypoints: Mapping[str, np.ndarray]  # (W, dof) per arm; empty when not solved
+    plan_time: float
+    solved: bool
+    checks: int  # validity checks made
+
+
+def _ompl() -> tuple[Any, Any, Any]:
+    try:
+        from ompl import base, geometric, util
+    except ImportError as exc:  # optional dependency
+        raise NehmoError(
+            "the OMPL baseline needs the PyPI package 'ompl' (pip install ompl==2.0.1)"
+        ) from exc
+    return base, geometric, util
+
+
+def plan_rrt_connect(
+    cell: Cell,
+    start: Mapping[str, np.ndarray],
+    goal: Mapping[str, np.ndarray],
+    settings: OmplSettings | None = None,
+    world: CellWorld | None = None,
+) -> OmplResult:
+    """Plan all arms jointly from ``start`` to ``goal`` with RRT-Connect."""
+    s = settings or OmplSettings()
+    ob, og, ou = _ompl()
+    ou.setLogLevel(ou.LogLevel.LOG_ERROR)
+    if s.seed is not None:
+        ou.RNG.setSeed(s.seed)
+    lows, highs, sizes = [], [], []
+    for arm in cell.arms:
+        lo, hi = sampling_box(arm.robot)
+        lows.append(lo)
+        highs.append(hi)
+        sizes.append(arm.robot.dof)
+    low, high = np.concatenate(lows), np.concatenate(highs)
+    n = len(low)
+    space = ob.RealVectorStateSpace(n)
+    bounds = ob.RealVectorBounds(n)
+    for i in range(n):
+        bounds.setLow(i, float(low[i]))
+        bounds.setHigh(i, float(high[i]))
+    space.setBounds(bounds)
+    own_world = world is None
+    w = world if world is not None else CellWorld(cell)
+    checks = [0]
+    splits = np.cumsum(sizes)[:-1]
+
+    def configuration(values: np.ndarray) -> dict[str, np.ndarray]:
+        parts = np.split(values, splits)
+        return {a.arm_id: p for a, p in zip(cell.arms, parts, strict=True)}
+
+    def valid(state: Any) -> bool:
+        checks[0] += 1
+        w.set_configuration(configuration(np.array([state[i] for i in range(n)])))
+        return not w.in_collision()
+
+    t0 = time.perf_counter()
+    try:
+        ss = og.SimpleSetup(space)
+        ss.setStateValidityChecker(valid)
+        si = ss.getSpaceInformation()
+        si.setStateValidityCheckingResolution(s.check_step / space.getMaximumExtent())
+        endpoints = []
+        for values in (start, goal):
+            q = np.concatenate(
+                [cell.arms[i].robot.wrap(values[a.arm_id]) for i, a in enumerate(cell.arms)]
+            )
+            state = space.allocState()
+            for i in range(n):
+                state[i] = float(np.clip(q[i], low[i], high[i]))
+            endpoints.append(state)
+        ss.setStartAndGoalStates(endpoints[0], endpoints[1])
+        planner = og.RRTConnect(si)
+        planner.setRange(s.step)
+        ss.setPlanner(planner)
+        solved = bool(ss.solve(s.time_limit)) and ss.haveExactSolutionPath()
+        waypoints: dict[str, np.ndarray] = {}
+        if solved:
+            if s.simplify:
+                ss.simplifySolution()
+            path = ss.getSolutionPath()
+            path.interpolate(max(2, int(np.ceil(path.length() / s.step)) + 1))
+            rows = np.array(
+                [[path.getState(k)[i] for i in range(n)] for k in range(path.getStateCount())]
+            )
+            waypoints = {a: r.T for a, r in configuration(rows.T).items()}  # (W, dof) each
+        return OmplResult(waypoints, time.perf_counter() - t0, solved, checks[0])
+    finally:
+        if own_world:
+            w.close()

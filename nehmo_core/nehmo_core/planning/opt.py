@@ -1,0 +1,82 @@
+"""Problem Opt of one planning step, and its closed-form worst-case peer prediction.
+
+In step variables ``y = t_plan·u`` [rad] (the own arm's displacement over the step)::
+
+    min_y ‖e₀ + y‖²   s.t.  V_i(t_safe, x_i + (y, 0)) ≥ ε  for every constrained peer i,
+                            |y_j| ≤ t_plan·ū,
+
+with ``e₀ = q¹ − q_goal`` (continuous joints optionally wrapped) and ``x_i`` the pair state in
+model ``i``'s frame with the peer already moved by its worst case
+``dⁱ = −d̄·sign(∂V/∂qⁱ)`` evaluated at ``τ = t_plan`` from the current state (DESIGN.md § 3).
+Solvers return ``u = y / t_plan``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from nehmo_core.planning.value_model import PairValueModel
+
+__all__ = ["Constraints", "OptProblem", "worst_case_disturbance"]
+
+
+def worst_case_disturbance(grad_peer: np.ndarray, d_max: float) -> np.ndarray:
+    """``d = −d̄·sign(∂V/∂q_peer)`` (…, n2) [rad/s]: minimizes ``⟨∇_{q_peer}V, d⟩`` over the box."""
+    return -d_max * np.sign(grad_peer)
+
+
+@dataclass(frozen=True)
+class Constraints:
+    """The safety constraints of one step: pair states grouped by model for batched calls."""
+
+    models: Sequence[PairValueModel]
+    groups: Sequence[tuple[int, np.ndarray]]  # (model index, base states (k, n)) per model
+    t_safe: float
+    epsilon: float
+
+    @property
+    def count(self) -> int:
+        return sum(len(states) for _, states in self.groups)
+
+    def states(self, y: np.ndarray) -> list[np.ndarray]:
+        out = []
+        for _, states in self.groups:
+            shifted = states.copy()
+            shifted[:, : len(y)] += y
+            out.append(shifted)
+        return out
+
+    def evaluate(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(c (m,), J (m, n1))``: ``c = V − ε`` and its gradient with respect to ``y``."""
+        values, jacobians = [], []
+        for (index, _), states in zip(self.groups, self.states(y), strict=True):
+            v, g = self.models[index].evaluate(self.t_safe, states)
+            values.append(v - self.epsilon)
+            jacobians.append(g[:, : len(y)])
+        if not values:
+            return np.zeros(0), np.zeros((0, len(y)))
+        return np.concatenate(values), np.concatenate(jacobians)
+
+
+@dataclass(frozen=True)
+class OptProblem:
+    """One step of Opt in step variables ``y`` (see the module docstring)."""
+
+    error0: np.ndarray  # e₀ = q¹ − q_goal (n1,) [rad]
+    y_max: float  # t_plan·ū [rad]
+    t_plan: float
+    constraints: Constraints
+
+    def cost(self, y: np.ndarray) -> float:
+        e = self.error0 + y
+        return float(e @ e)
+
+    def naive_step(self) -> np.ndarray:
+        """The unconstrained minimizer: straight toward the goal, clipped to the box."""
+        return np.clip(-self.error0, -self.y_max, self.y_max)
+
+    def velocity(self, y: np.ndarray) -> np.ndarray:
+        return y / self.t_plan

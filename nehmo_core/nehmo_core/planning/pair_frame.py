@@ -1,0 +1,125 @@
+"""Map a pair of arms of a cell into the frame of a trained pair model.
+
+A pair model is trained with the controlled arm (robot 1) at the origin and the other arm
+(robot 2) at a fixed relative pose ``M = T_1_2``. In a cell, the relative pose of a peer seen
+from the planning arm is ``T_own⁻¹·T_peer``. When it equals ``Rz(φ)·M·Rz(ψ)`` (the same base
+distance and height, turned about the own base by ``φ`` and about the peer base by ``ψ``), the
+cell pair is the model pair with the own arm turned by ``−φ`` and the peer turned by ``ψ``
+about their vertical base axes. For an arm whose first joint turns about its base's z axis
+through the base origin (UR5, Kinova Gen3), that is a shift of the first joint:
+``q¹₁ → q¹₁ − s¹·φ``, ``q²₁ → q²₁ + s²·ψ`` (``s = ±1``: the joint axis along ±z). Distances,
+and so values, are unchanged by the rigid motion; gradients are unchanged by a shift. E.g. in
+the three- and five-UR5 cells the centre arm's shift is 0, π or ±π/2 (REFERENCE_NOTES § A).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from nehmo_core.geometry.kinematics import ArmKinematics
+from nehmo_core.robots.loader import load_robot
+from nehmo_core.robots.model import ArmSpec, Pose, RobotModel, wrap_angle
+
+__all__ = ["PairMapping", "arm_reach", "base_yaw_joint", "match_pair", "relative_pose"]
+
+POSITION_TOL = 1e-6  # [m]
+ANGLE_TOL = 1e-6  # [rad]
+
+
+@dataclass(frozen=True)
+class PairMapping:
+    """How one (own arm, peer) pair of a cell maps into model ``model_index``'s frame."""
+
+    model_index: int
+    own_shift: np.ndarray  # (n1,) added to the own joint vector [rad]
+    peer_shift: np.ndarray  # (n2,) added to the peer joint vector [rad]
+
+    def state(self, q_own: np.ndarray, q_peer: np.ndarray) -> np.ndarray:
+        """The pair state ``x`` (n1 + n2,) in the model frame."""
+        return np.concatenate([q_own + self.own_shift, q_peer + self.peer_shift])
+
+
+def relative_pose(own: Pose, peer: Pose) -> np.ndarray:
+    """``T_own_peer = T_world_own⁻¹ · T_world_peer`` (4, 4)."""
+    return np.linalg.inv(own.matrix()) @ peer.matrix()
+
+
+@functools.cache
+def base_yaw_joint(robot_name: str) -> float | None:
+    """``s`` if the first joint turns the arm about its base z axis by ``s·q₁`` (s = ±1), else None.
+
+    Read from the URDF chain: the fixed transforms before the first joint must keep its axis on
+    the base's z axis through the origin.
+    """
+    kin = ArmKinematics(load_robot(robot_name))
+    T = np.eye(4)
+    for step in kin._steps:
+        T = T @ step.T_parent_joint.double().numpy()
+        if step.axis is None:
+            continue
+        if step.q_index != 0:
+            return None
+        axis = T[:3, :3] @ step.axis.double().numpy()
+        if np.linalg.norm(T[:2, 3]) > POSITION_TOL or np.linalg.norm(axis[:2]) > ANGLE_TOL:
+            return None
+        return float(np.sign(axis[2]))
+    return None
+
+
+def _yaw_only(T: np.ndarray) -> float | None:
+    """The yaw of ``T`` if its rotation is a pure rotation about z, else None."""
+    R = T[:3, :3]
+    if abs(R[2, 2] - 1.0) > ANGLE_TOL:
+        return None
+    return math.atan2(R[1, 0], R[0, 0])
+
+
+def _shift(robot: RobotModel, sign: float, angle: float) -> np.ndarray:
+    out = np.zeros(robot.dof)
+    out[0] = sign * angle
+    return out
+
+
+def match_pair(
+    own: ArmSpec, peer: ArmSpec, models: Sequence[tuple[str, str, Pose]]
+) -> PairMapping | None:
+    """The first model ``(robot1, robot2, base2)`` that the cell pair maps onto, or None."""
+    T = relative_pose(own.base, peer.base)
+    yaw = _yaw_only(T)
+    s_own, s_peer = base_yaw_joint(own.robot.name), base_yaw_joint(peer.robot.name)
+    for index, (robot1, robot2, base2) in enumerate(models):
+        if (robot1, robot2) != (own.robot.name, peer.robot.name):
+            continue
+        M = base2.matrix()
+        yaw_m = _yaw_only(M)
+        if np.allclose(T, M, atol=POSITION_TOL):
+            return PairMapping(index, np.zeros(own.robot.dof), np.zeros(peer.robot.dof))
+        if yaw is None or yaw_m is None or s_own is None or s_peer is None:
+            continue
+        r, r_m = np.linalg.norm(T[:2, 3]), np.linalg.norm(M[:2, 3])
+        if abs(r - r_m) > POSITION_TOL or abs(T[2, 3] - M[2, 3]) > POSITION_TOL:
+            continue
+        phi = math.atan2(T[1, 3], T[0, 3]) - math.atan2(M[1, 3], M[0, 3]) if r > 0 else 0.0
+        psi = float(wrap_angle(yaw - yaw_m - phi))
+        own_shift = _shift(own.robot, s_own, float(wrap_angle(-phi)))
+        return PairMapping(index, own_shift, _shift(peer.robot, s_peer, psi))
+    return None
+
+
+@functools.cache
+def arm_reach(robot_name: str, samples: int = 2000) -> float:
+    """Largest distance [m] of any link-frame origin from the base origin, over random samples."""
+    robot = load_robot(robot_name)
+    kin = ArmKinematics(robot)
+    rng = np.random.default_rng(0)
+    lo, hi = np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi)
+    q = torch.from_numpy(rng.uniform(lo, hi, size=(samples, robot.dof)))
+    with torch.no_grad():
+        pts = kin.link_positions(q).numpy()
+    return float(np.linalg.norm(pts, axis=-1).max())

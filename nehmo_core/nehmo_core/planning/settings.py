@@ -1,0 +1,77 @@
+"""Settings of the NeHMO planner (problem Opt, its solvers and the fail-safe)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+from nehmo_core.errors import InvalidValueError, UnknownNameError
+
+__all__ = ["SOLVERS", "PlannerSettings"]
+
+SOLVERS = ("sqp", "ipopt")
+"""``sqp``: the exact active-set SQP of :mod:`nehmo_core.planning.sqp` (fast);
+``ipopt``: IPOPT through CasADi, the authors' setting (the reference)."""
+
+_PRESETS: dict[str, dict[str, Any]] = {
+    "paper": {},
+    "ipopt": {"solver": "ipopt"},
+    "wrapped_goal": {"wrap_goal": True},
+}
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """Problem Opt (paper § III-C, DESIGN.md § 3) and how it is solved.
+
+    Times are [s], joint speeds [rad/s], values [m]. ``t_plan < t_safe ≤`` the value function's
+    horizon is checked when a planner is built (the horizon belongs to the model).
+    """
+
+    epsilon: float = 0.05  # safety margin on V
+    t_plan: float = 0.1  # planning horizon: the command is held this long
+    t_safe: float = 0.3  # time-to-go at which V must stay ≥ epsilon after the step
+    u_max: float = 0.5  # ū: own joint speed bound
+    d_max: float = 0.5  # d̄: peers' joint speed bound (worst case)
+    wrap_goal: bool = False  # wrap continuous joints in the goal cost (the paper does not)
+    solver: str = "sqp"
+    deadline: float = 0.04  # a solve longer than this (one 25 Hz tick) triggers the fail-safe
+    reach_margin: float = 0.3  # peers farther than reach_own + reach_peer + margin are skipped
+    backend: str = "auto"  # evaluation of V, ∇V: generated C ("compiled") or CasADi's "vm"
+    # SQP
+    sqp_max_iter: int = 30
+    sqp_tol: float = 1e-7  # step and constraint tolerance, in step units t_plan·u [rad]
+    # IPOPT (authors' settings)
+    ipopt_tol: float = 1e-3
+    ipopt_max_iter: int = 30
+
+    def __post_init__(self) -> None:
+        for name in ("epsilon", "t_plan", "t_safe", "u_max", "d_max", "deadline", "sqp_tol"):
+            if not getattr(self, name) > 0:
+                raise InvalidValueError(name, "must be > 0", getattr(self, name))
+        if not self.t_plan < self.t_safe:
+            raise InvalidValueError("t_plan", f"must be < t_safe ({self.t_safe})", self.t_plan)
+        if not self.reach_margin >= 0:
+            raise InvalidValueError("reach_margin", "must be >= 0", self.reach_margin)
+        for name in ("sqp_max_iter", "ipopt_max_iter"):
+            if getattr(self, name) < 1:
+                raise InvalidValueError(name, "must be >= 1", getattr(self, name))
+        if not self.ipopt_tol > 0:
+            raise InvalidValueError("ipopt_tol", "must be > 0", self.ipopt_tol)
+        if self.solver not in SOLVERS:
+            raise UnknownNameError("solver", self.solver, SOLVERS)
+        if self.backend not in ("auto", "compiled", "vm"):
+            raise UnknownNameError("backend", self.backend, ("auto", "compiled", "vm"))
+
+    @classmethod
+    def preset(cls, name: str, **overrides: Any) -> PlannerSettings:
+        """Named settings: ``paper`` (defaults), ``ipopt``, ``wrapped_goal``."""
+        if name not in _PRESETS:
+            raise UnknownNameError("planner preset", name, _PRESETS)
+        return cls(**{**_PRESETS[name], **overrides})
+
+    def replace(self, **changes: Any) -> PlannerSettings:
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)

@@ -1,0 +1,109 @@
+"""CasADi export of the learned distance and the value networks vs torch; generated C cache."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from nehmo_core.errors import UnknownNameError
+from nehmo_core.geometry.distance_casadi import distance_function
+from nehmo_core.hjr.casadi_export import value_functions
+from nehmo_core.hjr.networks import NetworkSettings
+from nehmo_core.planning import codegen
+from nehmo_core.planning.codegen import compile_function
+from nehmo_core.planning.synthetic import proxy_distance_model, random_value_function
+from nehmo_core.planning.value_model import PairValueModel
+
+SMALL = NetworkSettings(width=32, hidden_layers=2)
+
+
+def _states(n: int, count: int, seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-np.pi, np.pi, size=(count, n))
+
+
+@pytest.mark.parametrize("pair", ["ur5_ur5", "ur5_kinova"])
+def test_distance_graph_matches_torch_value_and_gradient(pair: str) -> None:
+    model = proxy_distance_model(pair)
+    with torch.no_grad():  # a generic MLP, not only the pass-through of the proxy
+        for p in model.mlp.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    fn = distance_function(model)
+    q = _states(model.dof, 20, 1)
+    ref_v, ref_g = model.distance_and_gradient(q)
+    out = [fn(qi) for qi in q]
+    np.testing.assert_allclose([float(o[0]) for o in out], ref_v, atol=1e-9, rtol=0)
+    np.testing.assert_allclose([np.asarray(o[1]).ravel() for o in out], ref_g, atol=1e-9, rtol=0)
+
+
+@pytest.mark.parametrize(
+    ("pair", "variant", "scaling"),
+    [
+        ("ur5_ur5", "deepreach", "unit"),
+        ("ur5_ur5", "bc", "raw"),
+        ("ur5_ur5", "bc+sym", "unit"),
+        ("ur5_kinova", "bc+sym", "unit"),
+        ("ur5_kinova", "exact", "unit"),
+    ],
+)
+@pytest.mark.parametrize("backend", ["vm", "compiled"])
+def test_value_export_matches_torch(pair: str, variant: str, scaling: str, backend: str) -> None:
+    settings = NetworkSettings(width=32, hidden_layers=2, input_scaling=scaling)
+    vf = random_value_function(pair, variant, settings, residual_scale=1.0, seed=3)
+    value, value_grad = value_functions(vf, f"test_{pair}_{variant.replace('+', '')}")
+    fn = compile_function(value_grad, backend).function
+    x = _states(12, 40, 2)
+    for tau in (0.0, 0.3, 0.6):
+        ref_v, ref_g = vf.value_and_gradient(tau, x)
+        out = [fn(tau, xi) for xi in x]
+        np.testing.assert_allclose([float(o[0]) for o in out], ref_v, atol=1e-9, rtol=0)
+        grads = np.array([np.asarray(o[1]).ravel() for o in out])
+        np.testing.assert_allclose(grads, ref_g, atol=1e-9, rtol=0)
+        np.testing.assert_allclose([float(value(tau, xi)) for xi in x[:5]], ref_v[:5], atol=1e-9)
+
+
+def test_symmetric_export_is_invariant_under_the_mirror_map() -> None:
+    vf = random_value_function("ur5_ur5", "bc+sym", SMALL, residual_scale=1.0)
+    model = PairValueModel.from_value_function(vf, "test_sym", backend="vm")
+    system = vf.system
+    x = _states(12, 30, 4)
+    mirrored = system.symmetry(torch.from_numpy(x)).numpy()
+    v, _ = model.evaluate(0.3, x)
+    vm, _ = model.evaluate(0.3, mirrored)
+    np.testing.assert_allclose(v, vm, atol=1e-9)
+
+
+def test_batched_evaluation_equals_single_calls() -> None:
+    vf = random_value_function("ur5_ur5", "bc+sym", SMALL)
+    model = PairValueModel.from_value_function(vf, "test_batch")
+    x = _states(12, 4, 5)
+    v4, g4 = model.evaluate(0.2, x)
+    for i in range(4):
+        v1, g1 = model.evaluate(0.2, x[i : i + 1])
+        np.testing.assert_allclose(v4[i], v1[0], atol=1e-12)
+        np.testing.assert_allclose(g4[i], g1[0], atol=1e-12)
+
+
+def test_compiled_library_is_cached_by_content(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("NEHMO_CACHE", str(tmp_path))
+    vf = random_value_function("ur5_ur5", "deepreach", SMALL)
+    _, value_grad = value_functions(vf, "test_cache")
+    first = compile_function(value_grad, "compiled")
+    second = compile_function(value_grad, "compiled")
+    assert first.backend == "compiled" and first.library == second.library
+    other = random_value_function("ur5_ur5", "deepreach", SMALL, seed=9)
+    assert compile_function(value_functions(other, "test_cache")[1]).library != first.library
+
+
+def test_falls_back_to_the_vm_without_a_compiler(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("NEHMO_CACHE", str(tmp_path))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    vf = random_value_function("ur5_ur5", "deepreach", SMALL)
+    _, value_grad = value_functions(vf, "test_fallback")
+    with pytest.warns(RuntimeWarning, match="VM"):
+        result = compile_function(value_grad, "auto")
+    assert result.backend == "vm"
+    with pytest.raises(OSError):
+        compile_function(value_grad, "compiled")
+    with pytest.raises(UnknownNameError, match="auto"):
+        compile_function(value_grad, "jit")
+    assert codegen.BACKENDS == ("auto", "compiled", "vm")

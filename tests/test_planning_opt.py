@@ -1,0 +1,246 @@
+"""Problem Opt, its solvers and the fail-safe: fast code vs slow obvious references."""
+
+from __future__ import annotations
+
+import itertools
+import time
+
+import numpy as np
+import pytest
+from nehmo_core.errors import InvalidValueError, UnknownNameError
+from nehmo_core.hjr.networks import NetworkSettings
+from nehmo_core.planning.baselines import NaivePlanner
+from nehmo_core.planning.ipopt_solver import IpoptSolver
+from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver
+from nehmo_core.planning.opt import OptProblem, worst_case_disturbance
+from nehmo_core.planning.qp import project
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.sqp import SolveResult, solve_sqp
+from nehmo_core.planning.synthetic import random_value_function
+from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.robots import load_cell
+from nehmo_core.sim.scenarios import sample_configuration
+
+CELL = load_cell("dual_ur5")
+OWN, PEER = "ur5_0", "ur5_1"
+
+
+@pytest.fixture(scope="module")
+def value_function():
+    return random_value_function("ur5_ur5", "bc+sym", NetworkSettings(width=64, hidden_layers=2))
+
+
+@pytest.fixture(scope="module")
+def model(value_function) -> PairValueModel:
+    return PairValueModel.from_value_function(value_function, "test_opt_bcsym")
+
+
+def _near_contact(model: PairValueModel, seed: int, count: int) -> list[tuple[np.ndarray, ...]]:
+    """States and goals where the naive step breaks the constraint but staying still does not.
+
+    The goal pushes the own arm down the value's gradient, so the constraint is active.
+    """
+    rng = np.random.default_rng(seed)
+    robot = CELL.arm(OWN).robot
+    planner = NehmoPlanner(CELL, OWN, [model])
+    out = []
+    while len(out) < count:
+        q1, q2 = sample_configuration(robot, rng), sample_configuration(robot, rng)
+        v, g = model.evaluate(0.1, np.concatenate([q1, q2])[None])
+        if not 0.06 <= v[0] <= 0.2:
+            continue
+        goal = q1 - rng.uniform(0.3, 1.5) * np.sign(g[0, :6]) + rng.normal(0, 0.2, 6)
+        problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
+        c_naive, _ = problem.constraints.evaluate(problem.naive_step())
+        c_still, _ = problem.constraints.evaluate(np.zeros(6))
+        if c_naive[0] < 0 < c_still[0]:
+            out.append((q1, q2, goal))
+    return out
+
+
+def test_worst_case_disturbance_is_the_box_corner_minimizer() -> None:
+    rng = np.random.default_rng(0)
+    corners = np.array(list(itertools.product([-0.5, 0.5], repeat=6)))
+    for _ in range(50):
+        grad = rng.normal(size=6)
+        d = worst_case_disturbance(grad, 0.5)
+        brute = corners[np.argmin(corners @ grad)]
+        np.testing.assert_array_equal(d, brute)
+        assert grad @ d == pytest.approx((corners @ grad).min())
+
+
+def test_planner_predicts_peers_with_the_brute_force_worst_case(model: PairValueModel) -> None:
+    planner = NehmoPlanner(CELL, OWN, [model])
+    q1, q2, goal = _near_contact(model, 1, 1)[0]
+    now = planner._current(q1, {PEER: q2})
+    problem = planner._problem(q1 - goal, now)
+    predicted = problem.constraints.groups[0][1][0]
+    corners = np.array(list(itertools.product([-0.5, 0.5], repeat=6)))
+    worst = corners[np.argmin(corners @ now.grads[0][6:])]
+    np.testing.assert_allclose(predicted[6:], q2 + 0.1 * worst, atol=1e-12)
+
+
+def test_qp_projection_meets_kkt_conditions() -> None:
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        n, m = 6, rng.integers(1, 5)
+        N = np.vstack([rng.normal(size=(m, n)), np.eye(n), -np.eye(n)])
+        h = np.concatenate([rng.normal(size=m) - 0.5, -np.ones(2 * n)])
+        w0 = rng.normal(size=n) * 3
+        r = project(w0, N, h)
+        assert r.feasible
+        assert np.all(N @ r.w - h >= -1e-9)
+        assert np.all(r.lam >= -1e-12)
+        np.testing.assert_allclose(r.w - w0, N.T @ r.lam, atol=1e-9)
+        np.testing.assert_allclose(r.lam * (N @ r.w - h), 0.0, atol=1e-9)
+
+
+def test_qp_reports_infeasibility() -> None:
+    N = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    assert not project(np.zeros(2), N, np.array([1.0, 0.0])).feasible
+
+
+def test_safe_unconstrained_step_equals_the_naive_step(model: PairValueModel) -> None:
+    planner = NehmoPlanner(CELL, OWN, [model])
+    naive = NaivePlanner(CELL, OWN)
+    q1 = np.array([0.0, -2.4, 1.5, -1.6, -1.5, 0.0])  # arms folded away from each other
+    q2 = q1.copy()
+    goal = q1 + np.array([0.3, 0.01, -0.02, 0.2, -0.6, 0.004])
+    result = planner.plan(q1, {PEER: q2}, goal)
+    assert result.telemetry.status == "naive"
+    assert result.telemetry.min_value > 0.3
+    np.testing.assert_array_equal(result.velocity, naive.plan(q1, {}, goal).velocity)
+
+
+def test_constraint_holds_at_the_solution_against_an_adversarial_peer(
+    model: PairValueModel, value_function
+) -> None:
+    planner = NehmoPlanner(CELL, OWN, [model], PlannerSettings(deadline=1.0))
+    solved = 0
+    for q1, q2, goal in _near_contact(model, 3, 12):
+        for _ in range(5):  # the peer plays its worst case every step
+            result = planner.plan(q1, {PEER: q2}, goal)
+            _, grad = value_function.value_and_gradient(0.1, np.concatenate([q1, q2]))
+            d = worst_case_disturbance(grad[6:], 0.5)
+            if not result.telemetry.fail_safe:
+                solved += 1
+                x_next = np.concatenate([q1 + 0.1 * result.velocity, q2 + 0.1 * d])
+                assert value_function.value(0.3, x_next) >= 0.05 - 1e-6  # independent torch check
+            assert np.all(np.abs(result.velocity) <= 0.5 + 1e-12)
+            q1, q2 = q1 + 0.1 * result.velocity, q2 + 0.1 * d
+    assert solved >= 10
+
+
+def test_sqp_returns_the_ipopt_solution(model: PairValueModel) -> None:
+    planner = NehmoPlanner(CELL, OWN, [model])
+    reference = IpoptSolver(tol=1e-10, max_iter=300)
+    compared = 0
+    for q1, q2, goal in _near_contact(model, 4, 40):
+        problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
+        fast = solve_sqp(problem, np.zeros(6), tol=1e-9)
+        if fast.status != "optimal":
+            continue
+        ref = reference.solve(problem, np.zeros(6))
+        assert ref.status == "optimal"
+        np.testing.assert_allclose(fast.y, ref.y, atol=2e-6)  # step [rad]; ū·t_plan = 0.05
+        # IPOPT ends ~1e-8 inside the infeasible side of its bound; the costs agree to that.
+        assert abs(problem.cost(fast.y) - problem.cost(ref.y)) <= 1e-6 * (1.0 + problem.cost(ref.y))
+        assert fast.constraint.min() >= -1e-9
+        compared += 1
+    assert compared >= 5
+
+
+def test_default_ipopt_settings_agree_with_sqp_within_their_tolerance(model) -> None:
+    planner = NehmoPlanner(CELL, OWN, [model])
+    paper = IpoptSolver()  # tol 1e-3, max_iter 30, limited-memory Hessian
+    for q1, q2, goal in _near_contact(model, 5, 10):
+        problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
+        fast = solve_sqp(problem, np.zeros(6))
+        ref = paper.solve(problem, np.zeros(6))
+        if fast.status == "optimal" and ref.status == "optimal":
+            assert abs(problem.cost(fast.y) - problem.cost(ref.y)) <= 1e-2 * problem.cost(ref.y)
+
+
+class _Failing:
+    def __call__(self, problem: OptProblem, y_start: np.ndarray, deadline: float) -> SolveResult:
+        return SolveResult(np.zeros(6), "failed", 1, np.zeros(1))
+
+
+class _Crashing:
+    def __call__(self, problem: OptProblem, y_start: np.ndarray, deadline: float) -> SolveResult:
+        raise RuntimeError("injected")
+
+
+class _Slow:
+    def __call__(self, problem: OptProblem, y_start: np.ndarray, deadline: float) -> SolveResult:
+        time.sleep(0.06)
+        return SqpSolver()(problem, y_start, np.inf)
+
+
+@pytest.mark.parametrize(
+    ("solver", "status"), [(_Failing(), "failed"), (_Crashing(), "failed (RuntimeError)")]
+)
+def test_fail_safe_fires_on_solver_failure(model, value_function, solver, status) -> None:
+    planner = NehmoPlanner(CELL, OWN, [model], solver=solver)
+    q1, q2, goal = _near_contact(model, 6, 1)[0]
+    result = planner.plan(q1, {PEER: q2}, goal)
+    assert result.telemetry.fail_safe and result.telemetry.status == status
+    _, grad = value_function.value_and_gradient(0.1, np.concatenate([q1, q2]))
+    np.testing.assert_array_equal(result.velocity, 0.5 * np.sign(grad[:6]))
+    assert result.telemetry.critical_peer == PEER
+
+
+def test_fail_safe_fires_on_a_missed_deadline(model, value_function) -> None:
+    planner = NehmoPlanner(CELL, OWN, [model], PlannerSettings(deadline=0.04), solver=_Slow())
+    q1, q2, goal = _near_contact(model, 7, 1)[0]
+    result = planner.plan(q1, {PEER: q2}, goal)
+    assert result.telemetry.fail_safe and result.telemetry.status == "timeout"
+    assert result.telemetry.solve_time > 0.04
+    _, grad = value_function.value_and_gradient(0.1, np.concatenate([q1, q2]))
+    np.testing.assert_array_equal(result.velocity, 0.5 * np.sign(grad[:6]))
+
+
+def test_fail_safe_picks_the_most_critical_of_several_peers(model) -> None:
+    cell = load_cell("triple_ur5")
+    planner = NehmoPlanner(cell, "ur5_0", [model], solver=_Failing())
+    rng = np.random.default_rng(8)
+    robot = cell.arm("ur5_0").robot
+    q = {a: sample_configuration(robot, rng) for a in cell.arm_ids}
+    result = planner.plan(q["ur5_0"], {a: q[a] for a in ("ur5_1", "ur5_2")}, q["ur5_0"] + 1.0)
+    values = {
+        p: model.evaluate(0.1, m.state(q["ur5_0"], q[p])[None]) for p, m in planner.pairs.items()
+    }
+    critical = min(planner.pairs, key=lambda p: values[p][0][0])
+    assert result.telemetry.critical_peer == critical
+    np.testing.assert_array_equal(result.velocity, 0.5 * np.sign(values[critical][1][0, :6]))
+
+
+@pytest.mark.parametrize(
+    ("changes", "parameter"),
+    [
+        ({"epsilon": -0.1}, "epsilon"),
+        ({"t_plan": 0.0}, "t_plan"),
+        ({"t_plan": 0.4}, "t_plan"),
+        ({"u_max": 0.0}, "u_max"),
+        ({"d_max": -1.0}, "d_max"),
+        ({"deadline": 0.0}, "deadline"),
+        ({"sqp_max_iter": 0}, "sqp_max_iter"),
+        ({"reach_margin": -1.0}, "reach_margin"),
+    ],
+)
+def test_bad_settings_are_rejected_naming_the_parameter(changes, parameter) -> None:
+    with pytest.raises(InvalidValueError, match=f"`{parameter}`"):
+        PlannerSettings(**changes)
+
+
+def test_unknown_choices_list_the_valid_ones(model) -> None:
+    with pytest.raises(UnknownNameError, match="ipopt"):
+        PlannerSettings(solver="snopt")
+    with pytest.raises(UnknownNameError, match="paper"):
+        PlannerSettings.preset("fast")
+    with pytest.raises(InvalidValueError, match="`t_safe`"):
+        NehmoPlanner(CELL, OWN, [model], PlannerSettings(t_safe=0.7))
+    with pytest.raises(InvalidValueError, match="`q_self`"):
+        NehmoPlanner(CELL, OWN, [model]).plan(np.zeros(5), {PEER: np.zeros(6)}, np.zeros(6))
+    with pytest.raises(InvalidValueError, match="`peers`"):
+        NehmoPlanner(CELL, OWN, [model]).plan(np.zeros(6), {}, np.zeros(6))
