@@ -402,6 +402,8 @@ def load_value_function(
         import nehmo_core.hjr.arm_pairs  # noqa: F401  (registers the arm-pair systems)
 
         path = shipped_value_path(path, variant or "bc+sym")
+    elif isinstance(path, str) and "/" not in path and not Path(path).exists():
+        raise UnknownNameError("shipped value function", path, SHIPPED_VALUE_FUNCTIONS)
     elif variant is not None:
         raise InvalidValueError("variant", "is only used with a shipped model name", variant)
     path = Path(path)
