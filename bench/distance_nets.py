@@ -60,7 +60,9 @@ def run(n: int, workers: int) -> dict[str, object]:
         model = load_distance_model(pair)
         q_u = uniform_samples(pair, n, np.random.default_rng(7_000_001))
         d_u = exact_distances(pair, q_u, workers, f"{pair} uniform")
-        q_b, d_b = generate(DatasetSpec(pair, 0, n, seed=7_000_002), workers)
+        # Near-contact set: boundary samples grown from a fresh uniform draw (uniform part dropped).
+        q_all, d_all = generate(DatasetSpec(pair, n, n, seed=7_000_002), workers)
+        q_b, d_b = q_all[n:], d_all[n:]
         report["pairs"][pair] = {  # type: ignore[index]
             "uniform": evaluate(model, q_u, d_u),
             "near_contact": evaluate(model, q_b, d_b),

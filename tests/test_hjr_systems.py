@@ -22,7 +22,7 @@ from nehmo_core.hjr.systems import (
 
 
 def _ur5_like_pair() -> ArmPairSystem:
-    """A 6+6 pair with the UR5 map of REFERENCE_NOTES § E and a symmetric toy boundary."""
+    """A 6+6 pair with this project's UR5 mirror map and a symmetric toy boundary."""
     sign = np.array([-1.0, -1, -1, -1, -1, -1] * 2)
     offset = np.array([math.pi, math.pi, 0, math.pi, 0, math.pi] * 2)
 

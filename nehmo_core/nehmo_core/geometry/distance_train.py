@@ -146,6 +146,8 @@ def calibrate_offset(
 
 def evaluate(model: PairDistanceModel, q: np.ndarray, d: np.ndarray) -> dict[str, float]:
     """Accuracy figures on labelled samples (true distances ``d`` [m])."""
+    if len(d) == 0:
+        raise InvalidValueError("d", "must hold at least one labelled sample", len(d))
     feats = compute_features(model, q).double()
     with torch.no_grad():
         pred = model.head(feats).numpy()

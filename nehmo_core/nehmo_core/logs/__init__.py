@@ -1,8 +1,8 @@
 """The MCAP log schema of NeHMO: one writer and one reader for batch runs and the ROS recorder.
 
 Logs are rosbag2-compatible MCAP (profile ``ros2``, ``ros2msg`` schemas, ``cdr`` messages), so
-``ros2 bag``, Foxglove and the ``mcap`` and ``rosbags`` readers open them. Topics follow
-DESIGN.md § 5 (:mod:`nehmo_core.logs.topics`); message classes and their CDR codec live in
+``ros2 bag``, Foxglove and the ``mcap`` and ``rosbags`` readers open them. Topics are
+listed in :mod:`nehmo_core.logs.topics`; message classes and their CDR codec live in
 :mod:`nehmo_core.logs.messages`. A log whose writer was killed is repaired with
 ``python -m nehmo_core.logs.recover broken.mcap fixed.mcap``.
 """

@@ -1,4 +1,4 @@
-"""Topic names and message types of a NeHMO run (DESIGN.md § 5), shared by batch runs and ROS.
+"""Topic names and message types of a NeHMO run, shared by batch runs and ROS.
 
 Per arm ``<arm_id>``:
 

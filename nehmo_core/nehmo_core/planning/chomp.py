@@ -1,6 +1,6 @@
 """CHOMP as a centralized planner over the joint trajectories of all arms of a cell.
 
-The settings are MoveIt 2's CHOMP defaults (REFERENCE_NOTES § B). The trajectory of every joint of
+The settings are MoveIt 2's CHOMP defaults. The trajectory of every joint of
 every arm has ``waypoints`` points over ``duration`` seconds, start and goal fixed (continuous
 joints unwrapped to the shortest angle), initialized by a minimum-jerk (quintic) profile.
 

@@ -1,4 +1,4 @@
-"""The NeHMO planner of one arm: Algorithm 1 of the paper with problem Opt (DESIGN.md § 3).
+"""The NeHMO planner of one arm: Algorithm 1 of the paper with problem Opt.
 
 Every tick: map each peer in reach into a trained pair model's frame; evaluate ``V`` and ``∇V``
 of all pairs at ``τ = t_plan`` from the current state (one batched call per model); predict each
@@ -119,8 +119,10 @@ class NehmoPlanner:
         self._warm = np.zeros(self.robot.dof)
 
     # -- one tick -----------------------------------------------------------------------------
-    def _current(self, q: np.ndarray, peers: Mapping[str, np.ndarray]) -> _Peers:
-        ids = list(self.pairs)
+    def _current(
+        self, q: np.ndarray, peers: Mapping[str, np.ndarray], only_known: bool = False
+    ) -> _Peers:
+        ids = [p for p in self.pairs if p in peers] if only_known else list(self.pairs)
         index = [self.pairs[p].model_index for p in ids]
         states = [self.pairs[p].state(q, peers[p]) for p in ids]
         values = np.empty(len(ids))
@@ -149,6 +151,20 @@ class NehmoPlanner:
     def _fail_safe(self, now: _Peers) -> np.ndarray:
         critical = int(np.argmin(now.values))
         return self.settings.u_max * np.sign(now.grads[critical][: self.robot.dof])
+
+    def fail_safe(self, q_self: ArrayLike, peers: Mapping[str, ArrayLike]) -> np.ndarray:
+        """The fail-safe command (dof,) [rad/s] at this state: ``ū·sign(∂V/∂q¹)`` of the most
+        critical constrained peer; zero (hold) when no peer is constrained.
+
+        Cheap (one value-and-gradient evaluation); a ROS node computes it ahead of each solve
+        so that a solve that overruns its tick still has a safe command to fall back on.
+        Peers missing from ``peers`` are left out (the caller decides what a missing peer means).
+        """
+        q = self.robot.check_q(q_self, "q_self")
+        others = check_peers(self.cell, self.arm_id, peers)
+        if not any(p in others for p in self.pairs):
+            return np.zeros(self.robot.dof)
+        return self._fail_safe(self._current(q, others, only_known=True))
 
     def plan(
         self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike

@@ -3,8 +3,8 @@
 The state is every arm's joint vector stacked in the cell's arm order, bounded per joint by
 ``(−π, π]`` on continuous joints and the joint limits otherwise (start and goal are wrapped
 into that box). A PyBullet :class:`~nehmo_core.geometry.pybullet_world.CellWorld` checks each
-state exactly (arm-arm and self collisions). Settings follow the expert planner of Ha et al.
-(REFERENCE_NOTES § B): 0.1 rad steps, shortcutting, a time limit instead of an iteration count.
+state exactly (arm-arm and self collisions). Settings follow the expert planner of Ha et al.:
+0.1 rad steps, shortcutting, a time limit instead of an iteration count.
 The Python validity callback is the bottleneck (a few thousand checks per second).
 
 Needs the PyPI ``ompl`` package (2.0.1); it is imported on first use.

@@ -7,7 +7,7 @@ In step variables ``y = t_plan·u`` [rad] (the own arm's displacement over the s
 
 with ``e₀ = q¹ − q_goal`` (continuous joints optionally wrapped) and ``x_i`` the pair state in
 model ``i``'s frame with the peer already moved by its worst case
-``dⁱ = −d̄·sign(∂V/∂qⁱ)`` evaluated at ``τ = t_plan`` from the current state (DESIGN.md § 3).
+``dⁱ = −d̄·sign(∂V/∂qⁱ)`` evaluated at ``τ = t_plan`` from the current state.
 Solvers return ``u = y / t_plan``.
 """
 

@@ -22,7 +22,7 @@ _PRESETS: dict[str, dict[str, Any]] = {
 
 @dataclass(frozen=True)
 class PlannerSettings:
-    """Problem Opt (paper § III-C, DESIGN.md § 3) and how it is solved.
+    """Problem Opt (paper § III-C) and how it is solved.
 
     Times are [s], joint speeds [rad/s], values [m]. ``t_plan < t_safe ≤`` the value function's
     horizon is checked when a planner is built (the horizon belongs to the model).
