@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
 from nehmo_core.geometry.distance_data import (
     DatasetSpec,
     exact_distances,

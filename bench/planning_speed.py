@@ -30,6 +30,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
 import torch
+
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.chomp import plan_chomp
 from nehmo_core.planning.nehmo import NehmoPlanner

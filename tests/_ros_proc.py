@@ -3,7 +3,8 @@
 Modes
   pub SECONDS          embedded runtime: publish JointState on /arm_a/joint_states at 50 Hz
   sub SECONDS COUNT    embedded runtime: print received JointStates as JSON lines, stop at COUNT
-  plain_sub SECONDS    plain cyclonedds (no nehmo code): read rt/arm_a/joint_states, print JSON
+  plain_sub SECONDS [TOPIC]  plain cyclonedds (no nehmo code): read a JointState DDS topic
+                       (default rt/arm_a/joint_states), print JSON
   spin                 a node main() spinning until SIGINT/SIGTERM; prints "clean exit"
   params ARGS...       build a node from ARGS and print its parameters as JSON (one error line
                        and exit status 2 on bad parameters)
@@ -113,7 +114,7 @@ def run_sub(seconds: float, wanted: int) -> int:
     return 0
 
 
-def run_plain_sub(seconds: float) -> int:
+def run_plain_sub(seconds: float, dds_topic: str = "rt/arm_a/joint_states") -> int:
     """An independent participant: cyclonedds only, its own types and its own loopback config."""
     from cyclonedds.domain import Domain, DomainParticipant
     from cyclonedds.qos import Policy, Qos
@@ -137,7 +138,7 @@ def run_plain_sub(seconds: float) -> int:
         Policy.History.KeepLast(10),
         Policy.Durability.Volatile,
     )
-    topic = Topic(participant, "rt/arm_a/joint_states", Joints, qos=qos)
+    topic = Topic(participant, dds_topic, Joints, qos=qos)
     reader = DataReader(participant, topic, qos=qos)
     end = time.monotonic() + seconds
     n = 0
@@ -210,7 +211,7 @@ def main() -> int:
     if mode == "sub":
         return run_sub(float(args[0]), int(args[1]))
     if mode == "plain_sub":
-        return run_plain_sub(float(args[0]))
+        return run_plain_sub(float(args[0]), *args[1:2])
     if mode == "spin":
         return run_spin()
     if mode == "params":

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+
 from nehmo_core.errors import ModelFileError, UnknownNameError
 from nehmo_core.geometry.distance_data import exact_distances, pair_cell, uniform_samples
 from nehmo_core.geometry.distance_model import (

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 import torch
+
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.hjr.networks import NetworkSettings, Siren, ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import Air3D, HJISystem, TwoLinkPair

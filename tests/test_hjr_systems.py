@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 import torch
+
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.hjr.systems import (
     Air3D,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -9,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from safetensors.torch import load_file
+
 from nehmo_core.errors import InvalidValueError, ModelFileError, UnknownNameError
 from nehmo_core.hjr.networks import NetworkSettings
 from nehmo_core.hjr.systems import Air3D, TwoLinkPair
@@ -22,7 +25,6 @@ from nehmo_core.hjr.train import (
     parse_count,
     train,
 )
-from safetensors.torch import load_file
 
 TINY = TrainSettings(
     variant="bc+sym",
@@ -53,11 +55,13 @@ def test_tiny_run_writes_files_and_loads(tmp_path: Path) -> None:
     assert np.isfinite(vf.value(1.1, np.zeros((3, 3)))).all()
 
 
-def test_resume_is_identical_to_uninterrupted_run(tmp_path: Path) -> None:
-    train(Air3D(), TINY, tmp_path / "full", progress=False)
-    partial = train(Air3D(), TINY, tmp_path / "resumed", progress=False, stop_after_steps=7)
+@pytest.mark.parametrize("lr_schedule", ["constant", "cosine"])
+def test_resume_is_identical_to_uninterrupted_run(tmp_path: Path, lr_schedule: str) -> None:
+    settings = replace(TINY, lr_schedule=lr_schedule, learning_rate=1e-3)
+    train(Air3D(), settings, tmp_path / "full", progress=False)
+    partial = train(Air3D(), settings, tmp_path / "resumed", progress=False, stop_after_steps=7)
     assert partial.steps == 7 and not (tmp_path / "resumed" / "model.json").exists()
-    train(Air3D(), TINY, tmp_path / "resumed", resume=True, progress=False)
+    train(Air3D(), settings, tmp_path / "resumed", resume=True, progress=False)
     full, resumed = _weights(tmp_path / "full"), _weights(tmp_path / "resumed")
     for key in full:
         assert torch.equal(full[key], resumed[key]), key
@@ -94,6 +98,33 @@ def test_schedule_and_batches() -> None:
     assert bool(system.in_train(x).all())  # bc+sym folds into X_train
     tau2, x2, _ = draw_batch(system, settings, schedule, 5)
     assert torch.equal(x, x2) and torch.equal(tau, tau2)
+
+
+def test_learning_rate_schedules() -> None:
+    constant = TrainSettings(learning_rate=1e-3)
+    assert constant.learning_rate_at(0, 100) == constant.learning_rate_at(99, 100) == 1e-3
+    for name in ("cosine", "exponential"):
+        s = TrainSettings(learning_rate=1e-3, lr_schedule=name, lr_final_fraction=0.01)
+        rates = [s.learning_rate_at(k, 100) for k in range(100)]
+        assert rates[0] == pytest.approx(1e-3) and rates[-1] == pytest.approx(1e-5)
+        assert all(a >= b for a, b in itertools.pairwise(rates))
+    cosine = TrainSettings(learning_rate=1e-3, lr_schedule="cosine", lr_final_fraction=0.01)
+    assert cosine.learning_rate_at(50, 101) == pytest.approx(0.505e-3)
+    with pytest.raises(UnknownNameError, match="cosine"):
+        TrainSettings(lr_schedule="linear")
+    with pytest.raises(InvalidValueError, match="lr_final_fraction"):
+        TrainSettings(lr_final_fraction=0.0)
+
+
+def test_checkpoint_from_before_the_schedule_fields_resumes(tmp_path: Path) -> None:
+    """A sidecar without ``lr_schedule``/``lr_final_fraction`` means a constant rate."""
+    train(Air3D(), TINY, tmp_path / "old", progress=False, stop_after_steps=5)
+    sidecar = tmp_path / "old" / "checkpoint.json"
+    meta = json.loads(sidecar.read_text())
+    for key in ("lr_schedule", "lr_final_fraction"):
+        del meta["settings"][key]
+    sidecar.write_text(json.dumps(meta))
+    assert train(Air3D(), TINY, tmp_path / "old", resume=True, progress=False).steps == 20
 
 
 def test_count_parsing() -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.robots.loader import cell_from_dict

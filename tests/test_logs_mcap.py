@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 from _ros_testutil import REPO, child_env, start
+
 from nehmo_core.errors import UnknownNameError
 from nehmo_core.logs import (
     COLLISIONS_TOPIC,

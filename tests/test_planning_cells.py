@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr.networks import NetworkSettings

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+
 from nehmo_core.errors import UnknownNameError
 from nehmo_core.geometry.distance_casadi import distance_function
 from nehmo_core.hjr.casadi_export import value_functions

@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 import pytest
+
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.hjr.networks import NetworkSettings
 from nehmo_core.planning.baselines import NaivePlanner

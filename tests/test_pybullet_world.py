@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.robots import load_cell

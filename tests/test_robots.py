@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError, UnknownNameError
 from nehmo_core.robots import ROBOT_NAMES, cell_names, load_cell, load_robot
 from nehmo_core.robots.loader import cell_from_dict, robot_from_urdf

@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 import pytest
-from nehmo_core.logs import messages as M
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.msg import get_types_from_msg
 
+from nehmo_core.logs import messages as M
 from nehmo_ros import msgs
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 from _ros_testutil import DOMAIN_ID, finish, start
+
 from nehmo_ros.embedded import (
     InvalidParameterValueException,
     Node,

@@ -12,6 +12,8 @@ from collections.abc import Iterator
 
 import pytest
 from _ros_testutil import DOMAIN_ID, finish, start
+
+from nehmo_ros import msgs
 from nehmo_ros.embedded import (
     MultiThreadedExecutor,
     Node,
@@ -21,8 +23,6 @@ from nehmo_ros.embedded import (
     try_shutdown,
 )
 from nehmo_ros.embedded.config import LOOPBACK_XML, DdsConfigError, dds_config
-
-from nehmo_ros import msgs
 
 
 @pytest.fixture

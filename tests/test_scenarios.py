@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.robots import load_cell, load_robot
 from nehmo_core.sim.scenarios import (

@@ -73,13 +73,13 @@ def test_gradient_matches_finite_differences(name: str, variant: str) -> None:
 @pytest.mark.parametrize(("name", "variant"), [s for s in SHIPPED if s[1] != "deepreach"])
 def test_boundary_condition_holds_at_zero_time_to_go(name: str, variant: str) -> None:
     vf = load_value_function(name, variant=variant)
-    tau, x = _states(vf, 500, seed=3)
+    _, x = _states(vf, 500, seed=3)
     with torch.no_grad():
-        l = vf.system.boundary(torch.as_tensor(x, dtype=torch.float32)).numpy()
+        lx = vf.system.boundary(torch.as_tensor(x, dtype=torch.float32)).numpy()
     v0 = vf.value(np.zeros(len(x)), x)
-    assert np.mean(np.abs(v0 - l)) < 0.01
+    assert np.mean(np.abs(v0 - lx)) < 0.01
     # Time-to-go only shrinks the safe set: V(τ, x) ≤ l(x) up to the fit error.
-    assert np.mean(vf.value(np.full(len(x), vf.system.horizon), x) <= l + 0.01) > 0.97
+    assert np.mean(vf.value(np.full(len(x), vf.system.horizon), x) <= lx + 0.01) > 0.97
 
 
 def test_shipped_names_and_variants_are_checked() -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+
 from nehmo_core.geometry.distance_data import pair_cell, uniform_samples
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.geometry.pybullet_world import CellWorld

@@ -15,7 +15,12 @@ from nehmo_core.errors import NehmoError
 
 # sub-command: (module, add-arguments function, run function, help).
 _COMMANDS: dict[str, tuple[str, str, str, str]] = {
-    "demo": ("nehmo_core.demo", "add_arguments", "run", "a short simulated dual-UR5 run"),
+    "demo": (
+        "nehmo_core.demo",
+        "add_arguments",
+        "run",
+        "a dual-UR5 episode through the ROS 2 node suite",
+    ),
     "distance": (
         "nehmo_core.geometry.distance_cli",
         "add_arguments",

@@ -1,64 +1,73 @@
-"""A short simulated dual-UR5 run through ``nehmo_core`` (``./run demo``).
+"""The main job (``./run demo``): a dual-UR5 episode through the ROS 2 node suite.
 
-Both arms drive straight toward their goals (the naive planner, clamped to 0.5 rad/s) at 25 Hz
-while the exact PyBullet check watches every pair; the learned distance is printed beside the
-exact one. This shows the robot models, the geometry and the learned distance at work; the
-safety-aware planner replaces the naive one as it lands.
+The ``sim_bridge``, one ``arm_planner`` per arm and the ``recorder`` run as separate processes
+over the embedded ROS 2 runtime (Cyclone DDS on loopback, a DDS domain of their own), started,
+stopped and evaluated by ``nehmo_ros.orchestrate``. The scenario is one where the naive planner
+collides within a second, so the arms must coordinate. The metrics come from the MCAP log alone
+(``nehmo_core.eval``); a GIF and a distance plot of the episode are rendered from it too.
+
+Until trained value functions ship, the planners use the synthetic stand-ins (``--model
+synthetic``: the learned distance plus a small random residual, not a reachability value);
+pass ``--model PATH`` for a training run directory. Needs the ``nehmo_ros`` and ``sim_bridge``
+packages installed (``./run`` installs them).
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
-import numpy as np
-
-from nehmo_core.geometry.distance_model import load_distance_model
-from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenarios import goal_error, sample_scenario
-
-U_MAX = 0.5  # [rad/s]
-RATE = 25.0  # [Hz]
+from nehmo_core.errors import NehmoError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--seed", type=int, default=3, help="scenario seed")
+    parser.add_argument("--seed", type=int, default=0, help="scenario set seed")
+    parser.add_argument("--index", type=int, default=0, help="scenario index in the set")
+    parser.add_argument("--planner", default="nehmo", help="planner kind (or one per arm, '/')")
+    parser.add_argument("--model", default="synthetic", help="synthetic | shipped | PATH")
     parser.add_argument("--time-limit", type=float, default=20.0, help="[s] of simulated time")
+    parser.add_argument("--out", default="out/demo", help="output directory")
+    parser.add_argument("--no-render", action="store_true", help="skip the GIF and plot")
 
 
 def run(args: argparse.Namespace) -> int:
+    try:
+        from nehmo_ros.orchestrate import SuiteSettings, format_metrics, run_suite
+    except ImportError as exc:
+        raise NehmoError(
+            f"the demo needs the nehmo_ros and sim_bridge packages ({exc}); run it through ./run"
+        ) from None
+    from nehmo_core.eval.render import render_episode
+    from nehmo_core.robots import load_cell
+    from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
+
+    out = Path(args.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
     cell = load_cell("dual_ur5")
-    model = load_distance_model("ur5_ur5")
-    rng = np.random.default_rng(args.seed)
+    scenarios = generate_scenario_set(cell, args.seed, args.index + 1)
+    scenario_file = save_scenario_set(scenarios, out / "scenarios.json")
+    settings = SuiteSettings(planner=args.planner, model=args.model, time_limit=args.time_limit)
+    print(
+        f"dual_ur5, scenario {args.index} of seed {args.seed}: sim_bridge + "
+        f"{len(cell.arms)} x arm_planner ({args.planner}, model {args.model}) + recorder "
+        "as separate processes over the embedded ROS 2 runtime (loopback)",
+        flush=True,
+    )
     t0 = time.perf_counter()
-    with CellWorld(cell) as world:
-        sc = sample_scenario(cell, rng, world)
-        q = {k: v.copy() for k, v in sc.start.items()}
-        dt = 1.0 / RATE
-        steps, outcome, min_exact, worst_model_err = 0, "time limit", np.inf, 0.0
-        while steps * dt < args.time_limit:
-            for arm in cell.arms:
-                e = goal_error(q[arm.arm_id], sc.goal[arm.arm_id], arm.robot)
-                q[arm.arm_id] = q[arm.arm_id] - np.clip(e / dt, -U_MAX, U_MAX) * dt
-            steps += 1
-            world.set_configuration(q)
-            exact = world.distance("ur5_0", "ur5_1")
-            learned = float(model.distance(np.concatenate([q["ur5_0"], q["ur5_1"]])))
-            min_exact = min(min_exact, exact)
-            worst_model_err = max(worst_model_err, abs(min(exact, 1.0) - learned))
-            if world.in_collision():
-                outcome = "collision"
-                break
-            errs = [np.linalg.norm(goal_error(q[a], sc.goal[a], cell.arm(a).robot)) for a in q]
-            if max(errs) < 0.1:
-                outcome = "success"
-                break
-    print(f"dual_ur5 naive run, scenario seed {args.seed}: {outcome} after {steps * dt:.2f} s")
-    print(f"  minimum exact arm-arm distance: {min_exact:.3f} m")
-    print(f"  worst |learned - exact| distance along the run: {worst_model_err:.3f} m")
-    print(f"  wall time: {time.perf_counter() - t0:.2f} s")
-    return 0
+    summary = run_suite(scenario_file, [args.index], out, settings)
+    episode = summary["episodes"][0]
+    print(f"  {format_metrics(summary['metrics'])}")
+    if episode["outcome"]:
+        print(f"  outcome {episode['outcome']} at {episode['end_time']:.2f} s simulated")
+    print(f"  MCAP log: {episode['log']}")
+    print(f"  summary:  {out / 'summary.json'}")
+    print(f"  process outputs: {out / 'logs'}")
+    if episode["outcome"] and not args.no_render:
+        for path in render_episode(episode["log"], out / "renders"):
+            print(f"  render:   {path}")
+    print(f"  wall time: {time.perf_counter() - t0:.1f} s")
+    return 0 if episode["outcome"] else 1
 
 
 def main(argv: list[str] | None = None) -> int:

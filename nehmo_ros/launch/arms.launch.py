@@ -2,12 +2,14 @@ r"""Launch one `sim_bridge`, one `arm_planner` per arm and one `recorder` for a 
 
     ros2 launch nehmo_ros arms.launch.py \
         cell:=/path/to/nehmo_core/nehmo_core/robots/cells/dual_ur5.yaml \
-        arm_ids:=ur5_0,ur5_1 planner:=nehmo
+        arm_ids:=ur5_0,ur5_1 planner:=nehmo model:=synthetic
 
 Each planner runs as node `arm_planner_<arm_id>` without a namespace: the node itself derives its
 absolute topic names (`/<arm_id>/joint_states`, ...) from its `arm_id` parameter, as in the
 design's ROS 2 interface, so it behaves the same under `ros2 run`. `arm_ids` must name arms of the
-cell YAML; every node also receives `cell`, and each planner `planner`.
+cell YAML; every node also receives `cell`, each planner `planner` and `model` (shipped |
+synthetic | a training run directory), the bridge `planners` (recorded in the episode
+metadata). The nodes run on wall time here; `orchestrate` runs the same nodes on simulated time.
 """
 
 from launch import LaunchContext, LaunchDescription
@@ -31,13 +33,14 @@ def make_nodes(context: LaunchContext) -> list[Node]:
     """Build the bridge, one planner per arm id and the recorder once arguments are known."""
     cell = LaunchConfiguration("cell").perform(context)
     planner = LaunchConfiguration("planner").perform(context)
+    model = LaunchConfiguration("model").perform(context)
     arm_ids = parse_arm_ids(LaunchConfiguration("arm_ids").perform(context))
     nodes = [
         Node(
             package="sim_bridge",
             executable="sim_bridge",
             name="sim_bridge",
-            parameters=[{"cell": cell}],
+            parameters=[{"cell": cell, "planners": planner}],
             output="screen",
         )
     ]
@@ -47,7 +50,7 @@ def make_nodes(context: LaunchContext) -> list[Node]:
                 package="nehmo_ros",
                 executable="arm_planner",
                 name=f"arm_planner_{arm_id}",
-                parameters=[{"arm_id": arm_id, "cell": cell, "planner": planner}],
+                parameters=[{"arm_id": arm_id, "cell": cell, "planner": planner, "model": model}],
                 output="screen",
             )
         )
@@ -73,6 +76,11 @@ def generate_launch_description() -> LaunchDescription:
             ),
             DeclareLaunchArgument(
                 "planner", default_value="nehmo", description="Planner kind of every arm."
+            ),
+            DeclareLaunchArgument(
+                "model",
+                default_value="shipped",
+                description="Value models: shipped | synthetic | a run directory or .safetensors.",
             ),
             OpaqueFunction(function=make_nodes),
         ]

@@ -1,19 +1,225 @@
-"""`arm_planner` node: plans one arm's velocity commands at a fixed rate with `nehmo_core`.
+"""`arm_planner` node: plans one arm's joint velocities at a fixed rate with `nehmo_core`.
 
-Placeholder: the node is not implemented yet. Running it prints a message and exits with status 2.
+    ros2 run nehmo_ros arm_planner --ros-args -p arm_id:=ur5_0 -p cell:=dual_ur5
+
+Topics (DESIGN.md § 5), ``<id>`` = ``arm_id``:
+
+- subscribes ``/<a>/joint_states`` of every arm ``a`` of the cell (sensor_msgs/JointState) and
+  ``/<id>/goal`` (sensor_msgs/JointState, positions [rad] by joint name);
+- publishes ``/<id>/velocity_controller/commands`` (std_msgs/Float64MultiArray, [rad/s] in the
+  robot's joint order) every ``1/rate`` s from a timer, and ``/<id>/planner/status``
+  (diagnostic_msgs/DiagnosticStatus) after every command.
+
+The solve runs in a worker thread (:class:`nehmo_ros.control.ArmController`): the command of
+tick k was planned from the observations of tick k−1; missed deadlines, solver failures and
+stale peers end in the fail-safe or a hold, and every tick's status says which.
+
+Parameters (validated at start; a bad one stops the node with one line naming it, the rule and
+the value): ``arm_id`` (required), ``cell`` (required: shipped name or YAML path), ``planner``
+(nehmo | nehmo_no_sym | opt_deepreach | naive | reckless), ``model`` (shipped | synthetic |
+path), ``rate`` [Hz], ``t_plan``, ``t_safe`` [s], ``epsilon`` [m], ``u_max``, ``d_max``
+[rad/s], ``solver`` (sqp | ipopt), ``deadline`` [s] (0: 75 % of the period), ``peer_timeout``
+[s], ``stale_policy`` (fail_safe | hold), ``allow_unmodelled`` (accept peers in reach that no
+pair model covers: they are then not constrained; default false: an error).
 """
 
+from __future__ import annotations
+
+import math
 import sys
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from nehmo_core.errors import InvalidValueError
+from nehmo_core.eval.telemetry import status_message
+from nehmo_core.logs.messages import DiagnosticStatus, KeyValue, serialize
+from nehmo_core.logs.topics import command_topic, goal_topic, joint_states_topic, status_topic
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_ros import ros
+from nehmo_ros.control import ArmController, ControlSettings, Decision
+from nehmo_ros.node_support import (
+    declare_parameters,
+    load_cell_parameter,
+    require_text,
+    run_main,
+)
+from nehmo_ros.planners import build_planner, warm_up
+
+#: Goals and the scenario are latched (transient local): a late subscriber still gets them.
+LATCHED = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
+
+DEFAULTS: dict[str, Any] = {
+    "arm_id": "",
+    "cell": "",
+    "planner": "nehmo",
+    "model": "shipped",
+    "rate": 25.0,
+    "t_plan": 0.1,
+    "t_safe": 0.3,
+    "epsilon": 0.05,
+    "u_max": 0.5,
+    "d_max": 0.5,
+    "solver": "sqp",
+    "deadline": 0.0,
+    "peer_timeout": 0.25,
+    "stale_policy": "fail_safe",
+    "allow_unmodelled": False,
+}
+
+
+def _level(decision: Decision) -> bytes:
+    if decision.error or decision.status in ("no_own_state", "non_finite_command"):
+        return ros.msg.DiagnosticStatus.ERROR
+    if decision.fail_safe or decision.hold or decision.stale:
+        return ros.msg.DiagnosticStatus.WARN
+    return ros.msg.DiagnosticStatus.OK
+
+
+class ArmPlannerNode:
+    """The node: parameters → planner → controller; timer, subscriptions, publishers."""
+
+    def __init__(self) -> None:
+        self.node = ros.Node("arm_planner")
+        p = declare_parameters(self.node, DEFAULTS)
+        self.cell = load_cell_parameter(p["cell"])
+        arm_id = require_text("arm_id", p["arm_id"], f"one of the cell's arms {self.cell.arm_ids}")
+        if arm_id not in self.cell.arm_ids:
+            raise InvalidValueError(
+                "arm_id", f"must name an arm of cell {self.cell.name!r} {self.cell.arm_ids}", arm_id
+            )
+        self.arm_id = arm_id
+        rate = float(p["rate"])
+        if not (math.isfinite(rate) and 0 < rate <= 1000):
+            raise InvalidValueError("rate", "must lie in (0, 1000] Hz", rate)
+        deadline = float(p["deadline"]) or 0.75 / rate
+        control = ControlSettings(
+            rate=rate,
+            deadline=deadline,
+            peer_timeout=float(p["peer_timeout"]),
+            stale_policy=p["stale_policy"],
+            u_max=float(p["u_max"]),
+        )
+        settings = PlannerSettings(
+            epsilon=float(p["epsilon"]),
+            t_plan=float(p["t_plan"]),
+            t_safe=float(p["t_safe"]),
+            u_max=float(p["u_max"]),
+            d_max=float(p["d_max"]),
+            solver=p["solver"],
+            deadline=deadline,
+        )
+        planner = build_planner(
+            p["planner"], self.cell, arm_id, p["model"], settings, bool(p["allow_unmodelled"])
+        )
+        unmodelled = getattr(planner, "peers_unmodelled", ())
+        if unmodelled:
+            self.node.get_logger().warning(f"peers {list(unmodelled)} are NOT constrained")
+        warm_up(planner, self.cell, arm_id)
+        self.controller = ArmController(self.cell, arm_id, planner, control)
+        self.robot = self.cell.arm(arm_id).robot
+        self.kind = p["planner"]
+        self._last_publish: float | None = None
+        self._ready = False
+
+        n = self.node
+        self.command_pub = n.create_publisher(ros.msg.Float64MultiArray, command_topic(arm_id), 10)
+        self.status_pub = n.create_publisher(ros.msg.DiagnosticStatus, status_topic(arm_id), 10)
+        for other in self.cell.arm_ids:
+            n.create_subscription(
+                ros.msg.JointState,
+                joint_states_topic(other),
+                self._state_callback(other),
+                ros.qos_profile_sensor_data,
+            )
+        n.create_subscription(ros.msg.JointState, goal_topic(arm_id), self._on_goal, LATCHED)
+        self.timer = n.create_timer(control.period, self._on_tick)
+        n.get_logger().info(
+            f"arm {arm_id} of cell {self.cell.name}: planner {p['planner']} (model "
+            f"{p['model']}), {rate:g} Hz, deadline {deadline * 1e3:.1f} ms, peers "
+            f"{list(self.controller.peer_ids)}, runtime {ros.RUNTIME}"
+        )
+
+    # -- callbacks ----------------------------------------------------------------------------
+    def _state_callback(self, arm_id: str) -> Callable[[Any], None]:
+        return lambda msg: self._on_state(arm_id, msg)
+
+    def _on_state(self, arm_id: str, msg: Any) -> None:
+        reason = self.controller.states.update(arm_id, msg.name, msg.position, time.monotonic())
+        if reason is not None:
+            self.node.get_logger().warning(
+                f"rejected joint state of {arm_id}: {reason}", throttle_duration_sec=2.0
+            )
+
+    def _on_goal(self, msg: Any) -> None:
+        try:
+            goal = self.controller.set_goal(msg.name, msg.position)
+        except InvalidValueError as err:
+            self.node.get_logger().error(f"rejected goal: {err}", throttle_duration_sec=2.0)
+            return
+        self.node.get_logger().info(
+            f"goal {[round(float(x), 3) for x in goal]}", throttle_duration_sec=5.0
+        )
+
+    def _on_tick(self) -> None:
+        now = time.monotonic()
+        stamp_ns = self.node.get_clock().now().nanoseconds
+        decision = self.controller.tick(now, stamp_ns)
+        if not self._ready:
+            if not decision.ready:  # nothing to command yet: the bridge's watchdog holds the arm
+                self.node.get_logger().info(
+                    f"waiting ({decision.status})", throttle_duration_sec=2.0
+                )
+                return
+            self._ready = True
+            self.node.get_logger().info("planning")
+        command = ros.msg.Float64MultiArray()
+        command.data = [float(u) for u in decision.velocity]
+        self.command_pub.publish(command)
+        period = math.nan if self._last_publish is None else now - self._last_publish
+        self._last_publish = now
+        self.status_pub.publish(serialize(self._status(decision, period, time.time_ns())))
+
+    def _status(self, d: Decision, period: float, wall_ns: int) -> DiagnosticStatus:
+        """The evaluation's status message (telemetry) plus the node's own counters."""
+        msg = status_message(self.arm_id, self.kind, self.controller.telemetry(d), d.observation_ns)
+        c = self.controller.counters
+        extra: dict[str, object] = {
+            "hold": str(d.hold).lower(),
+            "stale_peers": ",".join(d.stale),
+            "missing_peers": ",".join(d.missing),
+            "error": d.error,
+            "ticks": c.ticks,
+            "deadline_misses": c.deadline_misses,
+            "fail_safes": c.fail_safes,
+            "holds": c.holds,
+            "solver_errors": c.solver_errors,
+            "rejected_states": sum(self.controller.states.rejected.values()),
+            "period": repr(period),
+            "publish_wall_ns": wall_ns,
+            "command": ",".join(repr(float(u)) for u in d.velocity),
+        }
+        last = self.controller.last_observation
+        if last is not None:
+            extra.update({f"age_{a}": f"{age:.4f}" for a, age in last.ages.items()})
+        msg.level = _level(d)
+        msg.values += [KeyValue(key=k, value=str(v)) for k, v in extra.items()]
+        return msg
+
+    def on_stop(self) -> None:
+        """Command a stop once (if the middleware is still up) and end the worker thread."""
+        self.timer.cancel()
+        self.controller.stop()
+        if ros.ok():
+            command = ros.msg.Float64MultiArray()
+            command.data = [0.0] * self.robot.dof
+            self.command_pub.publish(command)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the `arm_planner` console script; `argv` is ignored for now."""
-    del argv
-    print(
-        "nehmo_ros arm_planner: not implemented yet; see the README's Limitations", file=sys.stderr
-    )
-    return 2
+    """Entry point of the `arm_planner` console script."""
+    sys.setswitchinterval(5e-4)  # the timer thread gets the GIL back from the solver quickly
+    return run_main("arm_planner", ArmPlannerNode, argv)
 
 
 if __name__ == "__main__":

@@ -1,18 +1,137 @@
-"""`recorder` node: writes the run's topics to a rosbag2-compatible MCAP log.
+"""`recorder` node: writes the suite's topics to a rosbag2-compatible MCAP log.
 
-Placeholder: the node is not implemented yet. Running it prints a message and exits with status 2.
+    ros2 run nehmo_ros recorder --ros-args -p cell:=dual_ur5 -p output:=run.mcap
+
+It records every topic of the NeHMO schema for the cell's arms (:func:`nehmo_core.logs.topics
+.run_topics`: joint states, commands, goals, planner status per arm; ``/clock``,
+``/nehmo/collisions``, ``/nehmo/scenario``) as CDR bytes through
+:class:`nehmo_core.logs.LogWriter` (profile ros2, ros2msg schemas, cdr), the same schema the
+batch runs write, so ``nehmo_core.eval`` evaluates a ROS run like a batch one.
+
+Log times: with ``stamp_source:=header`` (default) a message that carries a time (a header
+stamp, or ``/clock``'s time) is logged at that time and the others at their receive time on the
+node clock (simulated time under ``use_sim_time``), so the joint states of all arms published
+at one simulator step share one log time; ``stamp_source:=receive`` logs everything at its
+receive time, as ``ros2 bag record`` does.
+
+Durability: the log is flushed every ``flush_every`` messages or ``flush_interval`` s. On
+SIGINT/SIGTERM the node takes what is still queued, then writes the summary: nothing received
+is lost. After SIGKILL the file lacks its summary; repair it with
+``python -m nehmo_core.logs.recover broken.mcap fixed.mcap`` (loses at most the last flush
+interval).
 """
 
+from __future__ import annotations
+
 import sys
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from nehmo_core.errors import InvalidValueError, UnknownNameError
+from nehmo_core.logs.cdr import CdrReader
+from nehmo_core.logs.topics import (
+    CLOCK_TYPE,
+    COLLISIONS_TYPE,
+    JOINT_STATE_TYPE,
+    SCENARIO_TOPIC,
+    run_topics,
+    split_arm_topic,
+)
+from nehmo_core.logs.writer import LogWriter, QosDescription, WriterSettings
+from nehmo_ros import ros
+from nehmo_ros.node_support import declare_parameters, load_cell_parameter, run_main
+
+DEFAULTS: dict[str, Any] = {
+    "cell": "",
+    "output": "",
+    "stamp_source": "header",
+    "flush_every": 50,
+    "flush_interval": 0.5,
+}
+STAMP_SOURCES = ("header", "receive")
+#: Types whose CDR starts with a builtin_interfaces/Time (a header stamp or the clock).
+STAMPED_TYPES = (JOINT_STATE_TYPE, COLLISIONS_TYPE, CLOCK_TYPE)
+
+LATCHED = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
+RECORDING = ros.QoSProfile(depth=100)
+
+
+def leading_stamp_ns(data: bytes) -> int:
+    """The Time [ns] at the start of a CDR message (its header stamp, or a Clock's time)."""
+    reader = CdrReader(data)
+    sec = int(reader.primitive("int32"))  # type: ignore[call-overload]
+    nanosec = int(reader.primitive("uint32"))  # type: ignore[call-overload]
+    return sec * 1_000_000_000 + nanosec
+
+
+def is_latched(topic: str) -> bool:
+    """Topics published once and latched: the scenario and the goals."""
+    split = split_arm_topic(topic)
+    return topic == SCENARIO_TOPIC or (split is not None and split[1] == "goal")
+
+
+class RecorderNode:
+    """The node: one raw subscription per schema topic, one MCAP writer."""
+
+    def __init__(self) -> None:
+        self.node = n = ros.Node("recorder")
+        p = declare_parameters(n, DEFAULTS)
+        self.cell = load_cell_parameter(p["cell"])
+        if p["stamp_source"] not in STAMP_SOURCES:
+            raise UnknownNameError("stamp_source", p["stamp_source"], STAMP_SOURCES)
+        self.by_header = p["stamp_source"] == "header"
+        settings = WriterSettings(
+            flush_every=int(p["flush_every"]), flush_interval_s=float(p["flush_interval"])
+        )
+        output = p["output"] or time.strftime("nehmo_%Y%m%d_%H%M%S.mcap")
+        path = Path(output)
+        if path.suffix != ".mcap":
+            raise InvalidValueError("output", "must be a path ending in .mcap", output)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.writer = LogWriter(path, settings, library="nehmo_ros recorder")
+        self.path = path
+        self.topics = run_topics(list(self.cell.arm_ids))
+        for topic, msgtype in self.topics.items():
+            latched = is_latched(topic)
+            self.writer.add_topic(
+                topic,
+                msgtype,
+                QosDescription(depth=1, durability="transient_local")
+                if latched
+                else QosDescription(depth=RECORDING.depth),
+            )
+            n.create_subscription(
+                getattr(ros.msg, msgtype.rsplit("/", 1)[-1]),
+                topic,
+                self._callback(topic, msgtype),
+                LATCHED if latched else RECORDING,
+                raw=True,
+            )
+        self.count = 0
+        n.get_logger().info(f"recording {len(self.topics)} topics to {path}")
+
+    def _callback(self, topic: str, msgtype: str) -> Callable[[bytes], None]:
+        stamped = self.by_header and msgtype in STAMPED_TYPES
+        return lambda data: self._on_message(topic, msgtype, bytes(data), stamped)
+
+    def _on_message(self, topic: str, msgtype: str, data: bytes, stamped: bool) -> None:
+        received = self.node.get_clock().now().nanoseconds
+        log_time = leading_stamp_ns(data) if stamped else received
+        self.writer.write_raw(topic, data, max(log_time, 0), received, msgtype)
+        self.count += 1
+
+    def on_stop(self) -> None:
+        """Write the summary (the queued messages were taken by the final drain)."""
+        self.writer.close()
+        print(f"recorder: {self.count} messages written to {self.path}", flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the `recorder` console script; `argv` is ignored for now."""
-    del argv
-    print("nehmo_ros recorder: not implemented yet; see the README's Limitations", file=sys.stderr)
-    return 2
+    """Entry point of the `recorder` console script."""
+    return run_main("recorder", RecorderNode, argv, drain_s=0.3)
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(main())

@@ -88,8 +88,6 @@ else:  # pragma: no cover - needs a ROS 2 installation
     import rosgraph_msgs.msg as _rosgraph_msgs
     import sensor_msgs.msg as _sensor_msgs
     import std_msgs.msg as _std_msgs
-    from nehmo_core.logs.messages import deserialize as _deserialize
-    from nehmo_core.logs.messages import serialize as _serialize
     from rcl_interfaces.msg import ParameterDescriptor
     from rclpy.callback_groups import (
         CallbackGroup,
@@ -119,6 +117,9 @@ else:  # pragma: no cover - needs a ROS 2 installation
     from rclpy.time import Time
     from rclpy.timer import Timer
     from rclpy.utilities import remove_ros_args
+
+    from nehmo_core.logs.messages import deserialize as _deserialize
+    from nehmo_core.logs.messages import serialize as _serialize
 
     init = rclpy.init
     ok = rclpy.ok

@@ -1,18 +1,404 @@
-"""`sim_bridge` node: simulates the cell's arms in PyBullet and bridges them to ROS 2 topics.
+"""`sim_bridge` node: simulates a cell's arms (PyBullet, exact collisions) for the ROS suite.
 
-Placeholder: the node is not implemented yet. Running it prints a message and exits with status 2.
+    ros2 run sim_bridge sim_bridge --ros-args -p cell:=dual_ur5 -p seed:=13
+
+Every physics step (``physics_rate``, 100 Hz) it integrates each arm's latest velocity command
+with :class:`nehmo_core.sim.cell_sim.CellSimulator`, checks every arm pair and every arm's
+self-collision exactly, and publishes:
+
+- ``/<arm>/joint_states`` (sensor_msgs/JointState: positions [rad], the applied velocity
+  [rad/s]; one common stamp for all arms per step);
+- ``/nehmo/collisions`` (diagnostic_msgs/DiagnosticArray, one ERROR status per colliding pair)
+  on every step that collides;
+- ``/clock`` (rosgraph_msgs/Clock) when ``sim_time`` is true: simulated time, 0 at the start of
+  the episode, paced at ``real_time_factor`` × wall time. Other nodes then run with
+  ``use_sim_time:=true``. Without ``sim_time`` the stamps are wall time.
+
+It subscribes to ``/<arm>/velocity_controller/commands`` (std_msgs/Float64MultiArray, one value
+per joint in the robot's joint order). Commands of the wrong length or not finite are dropped
+(ros2_control drops wrong lengths silently; here each is counted and logged). **Watchdog:** an
+arm whose latest command is older than ``command_timeout`` holds still.
+
+**Scenario reset.** At start the cell is set to an episode's start configuration: episode
+``episode`` of the scenario set file ``scenarios`` (nehmo_core.sim.scenarios JSON), or, without
+a file, scenario ``index`` of the seeded set ``seed``. The goals go out on ``/<arm>/goal`` and
+the episode description (the evaluation's metadata JSON) on ``/nehmo/scenario``, both latched
+(transient local), so planners and recorder that start later still get them. With
+``wait_for_planners`` the episode (and the simulated clock, which stays at 0 until then)
+starts only when every arm's command topic has a publisher, plus ``start_delay`` s for
+discovery to settle (at most ``start_timeout`` s of waiting). The episode ends at the first
+collision (with ``stop_on_collision``), when every arm is within ``success_tolerance`` of its
+goal, or at ``time_limit``; the arms then hold still, and with ``exit_when_done`` the node
+exits.
 """
 
+from __future__ import annotations
+
+import json
+import math
 import sys
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from nehmo_core.errors import InvalidValueError, UnknownNameError
+from nehmo_core.eval.episode_log import EPISODE_FORMAT, EPISODE_FORMAT_VERSION, cell_metadata
+from nehmo_core.eval.metrics import goal_distance
+from nehmo_core.eval.setups import SUCCESS_NORMS, parse_row
+from nehmo_core.eval.telemetry import collisions_message, stamp
+from nehmo_core.logs.messages import Clock, Header, JointState, String, serialize
+from nehmo_core.logs.topics import (
+    CLOCK_TOPIC,
+    COLLISIONS_TOPIC,
+    SCENARIO_TOPIC,
+    command_topic,
+    goal_topic,
+    joint_states_topic,
+)
+from nehmo_core.robots.model import Cell
+from nehmo_core.sim.cell_sim import CellSimulator
+from nehmo_core.sim.scenarios import (
+    Scenario,
+    load_scenario_set,
+    sample_scenario,
+    scenario_rng,
+)
+from nehmo_ros import ros
+from nehmo_ros.node_support import declare_parameters, load_cell_parameter, run_main
+
+DEFAULTS: dict[str, Any] = {
+    "cell": "",
+    "scenarios": "",
+    "episode": 0,
+    "seed": 0,
+    "index": 0,
+    "physics_rate": 100.0,
+    "control_rate": 25.0,
+    "sim_time": False,
+    "real_time_factor": 1.0,
+    "command_timeout": 0.2,
+    "time_limit": 20.0,
+    "success_norm": "l2",
+    "success_tolerance": 0.1,
+    "stop_on_collision": True,
+    "self_collision": True,
+    "wait_for_planners": True,
+    "start_timeout": 60.0,
+    "start_delay": 0.5,
+    "exit_when_done": False,
+    "planners": "",
+}
+
+#: Goals and the scenario are latched (transient local): late subscribers still get them.
+LATCHED = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+@dataclass(frozen=True)
+class BridgeSettings:
+    """Validated parameters of the bridge (times [s], rates [Hz], tolerance [rad])."""
+
+    physics_rate: float
+    control_rate: float
+    sim_time: bool
+    real_time_factor: float
+    command_timeout: float
+    time_limit: float
+    success_norm: str
+    success_tolerance: float
+    stop_on_collision: bool
+    self_collision: bool
+    wait_for_planners: bool
+    start_timeout: float
+    start_delay: float
+    exit_when_done: bool
+
+    def __post_init__(self) -> None:
+        for name in ("physics_rate", "control_rate", "real_time_factor", "command_timeout"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise InvalidValueError(name, "must be a finite number > 0", value)
+        if self.physics_rate > 2000:
+            raise InvalidValueError("physics_rate", "must be <= 2000 Hz", self.physics_rate)
+        for name in ("time_limit", "success_tolerance", "start_timeout"):
+            if not getattr(self, name) > 0:
+                raise InvalidValueError(name, "must be > 0", getattr(self, name))
+        if not self.start_delay >= 0:
+            raise InvalidValueError("start_delay", "must be >= 0 [s]", self.start_delay)
+        if self.success_norm not in SUCCESS_NORMS:
+            raise UnknownNameError("success_norm", self.success_norm, SUCCESS_NORMS)
+
+    @property
+    def dt_ns(self) -> int:
+        """Simulated time of one physics step [ns]."""
+        return round(1e9 / self.physics_rate)
+
+    @property
+    def substeps_per_tick(self) -> int:
+        return max(1, round(self.physics_rate / self.control_rate))
+
+
+def load_episode(cell: Cell, p: dict[str, Any]) -> tuple[Scenario, dict[str, Any]]:
+    """The episode to run (from the scenario file, or drawn from ``seed``/``index``)."""
+    if p["scenarios"]:
+        scenario_set = load_scenario_set(p["scenarios"])
+        if scenario_set.cell != cell.name:
+            raise InvalidValueError(
+                "scenarios", f"must be a scenario set of cell {cell.name!r}", scenario_set.cell
+            )
+        episode = int(p["episode"])
+        if not 0 <= episode < len(scenario_set):
+            raise InvalidValueError(
+                "episode", f"must lie in [0, {len(scenario_set) - 1}] for {p['scenarios']}", episode
+            )
+        source = {
+            "file": p["scenarios"],
+            "episode": episode,
+            "seed": scenario_set.seed,
+            "index": scenario_set.indices[episode],
+        }
+        return scenario_set.scenarios[episode], source
+    seed, index = int(p["seed"]), int(p["index"])
+    if index < 0:
+        raise InvalidValueError("index", "must be >= 0", index)
+    scenario = sample_scenario(cell, scenario_rng(seed, index))
+    return scenario, {"seed": seed, "index": index}
+
+
+class SimBridgeNode:
+    """The node: one simulator, a wall-clock timer stepping it, topics per arm."""
+
+    def __init__(self) -> None:
+        self.node = n = ros.Node("sim_bridge")
+        p = declare_parameters(n, DEFAULTS)
+        if n.get_parameter("use_sim_time").value:
+            raise InvalidValueError(
+                "use_sim_time", "must be false for the bridge (it is the clock source)", True
+            )
+        self.cell = load_cell_parameter(p["cell"])
+        self.s = BridgeSettings(
+            physics_rate=float(p["physics_rate"]),
+            control_rate=float(p["control_rate"]),
+            sim_time=bool(p["sim_time"]),
+            real_time_factor=float(p["real_time_factor"]),
+            command_timeout=float(p["command_timeout"]),
+            time_limit=float(p["time_limit"]),
+            success_norm=str(p["success_norm"]),
+            success_tolerance=float(p["success_tolerance"]),
+            stop_on_collision=bool(p["stop_on_collision"]),
+            self_collision=bool(p["self_collision"]),
+            wait_for_planners=bool(p["wait_for_planners"]),
+            start_timeout=float(p["start_timeout"]),
+            start_delay=float(p["start_delay"]),
+            exit_when_done=bool(p["exit_when_done"]),
+        )
+        kinds = parse_row(p["planners"], self.cell) if p["planners"] else {}
+        self.scenario, source = load_episode(self.cell, p)
+        self.sim = CellSimulator(self.cell, substeps=1, self_collision=self.s.self_collision)
+        self.sim.reset(self.scenario.start)
+        self.metadata = self._metadata(kinds, source)
+
+        self.state_pubs = {
+            a: n.create_publisher(ros.msg.JointState, joint_states_topic(a), 10)
+            for a in self.cell.arm_ids
+        }
+        self.goal_pubs = {
+            a: n.create_publisher(ros.msg.JointState, goal_topic(a), LATCHED)
+            for a in self.cell.arm_ids
+        }
+        self.scenario_pub = n.create_publisher(ros.msg.String, SCENARIO_TOPIC, LATCHED)
+        self.collision_pub = n.create_publisher(ros.msg.DiagnosticArray, COLLISIONS_TOPIC, 10)
+        self.clock_pub = (
+            n.create_publisher(ros.msg.Clock, CLOCK_TOPIC, 10) if self.s.sim_time else None
+        )
+        self.commands: dict[str, tuple[np.ndarray, float]] = {}
+        self.commanded: set[str] = set()
+        self.dropped: dict[str, int] = dict.fromkeys(self.cell.arm_ids, 0)
+        for a in self.cell.arm_ids:
+            n.create_subscription(
+                ros.msg.Float64MultiArray, command_topic(a), self._command_callback(a), 10
+            )
+        self.t_ns = 0  # simulated time since the episode start [ns]
+        self.started = False
+        self.outcome = ""
+        self.created = time.monotonic()
+        self.done = False
+        self._done_at = math.inf
+        self._ready_at = math.inf
+        self._publish_episode()
+        self.timer = n.create_timer(
+            1.0 / (self.s.physics_rate * self.s.real_time_factor), self._step
+        )
+        n.get_logger().info(
+            f"cell {self.cell.name} ({', '.join(self.cell.arm_ids)}), episode {source}, "
+            f"{self.s.physics_rate:g} Hz physics, "
+            f"{'simulated time on /clock' if self.s.sim_time else 'wall time'}, "
+            f"runtime {ros.RUNTIME}"
+        )
+
+    def _metadata(self, kinds: dict[str, str], source: dict[str, Any]) -> dict[str, Any]:
+        """The evaluation's episode description (nehmo_core.eval.episode_log)."""
+        s = self.s
+        period_ns = round(1e9 / s.control_rate)
+        return {
+            "format": EPISODE_FORMAT,
+            "version": EPISODE_FORMAT_VERSION,
+            "source": "ros",
+            "scenario": source,
+            "cell": cell_metadata(self.cell),
+            "planners": kinds or dict.fromkeys(self.cell.arm_ids, "unknown"),
+            "timed_arms": list(self.cell.arm_ids),
+            "control": {
+                "rate_hz": s.control_rate,
+                "period_ns": period_ns,
+                "latency_ticks": 1,
+                "substeps": s.substeps_per_tick,
+                "self_collision": s.self_collision,
+                "time_limit": s.time_limit,
+                "max_ticks": round(s.time_limit * s.control_rate),
+                "physics_rate_hz": s.physics_rate,
+                "command_timeout": s.command_timeout,
+                "sim_time": s.sim_time,
+            },
+            "success": {"norm": s.success_norm, "tolerance": s.success_tolerance},
+            "start": {a: [float(v) for v in self.scenario.start[a]] for a in self.cell.arm_ids},
+            "goal": {a: [float(v) for v in self.scenario.goal[a]] for a in self.cell.arm_ids},
+        }
+
+    # -- publishing ---------------------------------------------------------------------------
+    def _stamp_ns(self) -> int:
+        """Stamp of the current state: simulated time, or wall time without ``sim_time``."""
+        if self.s.sim_time:
+            return self.t_ns
+        return self.node.get_clock().now().nanoseconds
+
+    def _joint_state(self, arm_id: str, q: np.ndarray, v: np.ndarray, t_ns: int) -> bytes:
+        """CDR bytes (published as such on either runtime: rclpy takes serialized messages)."""
+        msg = JointState(
+            header=Header(stamp=stamp(t_ns)),
+            name=list(self.cell.arm(arm_id).robot.joint_names),
+            position=[float(x) for x in q],
+            velocity=[float(x) for x in v],
+        )
+        return serialize(msg)
+
+    def _publish_episode(self) -> None:
+        t_ns = self._stamp_ns()
+        self.scenario_pub.publish(serialize(String(data=json.dumps(self.metadata))))
+        empty = np.zeros(0)
+        for a, pub in self.goal_pubs.items():
+            pub.publish(self._joint_state(a, self.scenario.goal[a], empty, t_ns))
+
+    def _publish_state(self, velocities: dict[str, np.ndarray]) -> None:
+        t_ns = self._stamp_ns()
+        if self.clock_pub is not None:
+            self.clock_pub.publish(serialize(Clock(clock=stamp(t_ns))))
+        for a, pub in self.state_pubs.items():
+            pub.publish(self._joint_state(a, self.sim.q[a], velocities[a], t_ns))
+
+    # -- callbacks ----------------------------------------------------------------------------
+    def _command_callback(self, arm_id: str) -> Callable[[Any], None]:
+        return lambda msg: self._on_command(arm_id, msg)
+
+    def _on_command(self, arm_id: str, msg: Any) -> None:
+        robot = self.cell.arm(arm_id).robot
+        data = np.asarray(list(msg.data), dtype=np.float64)
+        if data.shape != (robot.dof,) or not np.all(np.isfinite(data)):
+            self.dropped[arm_id] += 1
+            self.node.get_logger().warning(
+                f"dropped command of {arm_id}: needs {robot.dof} finite values, got "
+                f"{data.tolist()} ({self.dropped[arm_id]} dropped)",
+                throttle_duration_sec=2.0,
+            )
+            return
+        self.commands[arm_id] = (data, time.monotonic())
+        self.commanded.add(arm_id)
+
+    def _applied(self) -> dict[str, np.ndarray]:
+        """Each arm's velocity for this step: its latest command, or zero (watchdog, done)."""
+        now = time.monotonic()
+        out = {}
+        for arm in self.cell.arms:
+            latest = self.commands.get(arm.arm_id)
+            fresh = latest is not None and now - latest[1] <= self.s.command_timeout
+            moving = self.started and not self.done and fresh
+            out[arm.arm_id] = (
+                latest[0] if moving and latest is not None else np.zeros(arm.robot.dof)
+            )
+        return out
+
+    def _step(self) -> None:
+        if not self.started:
+            self._maybe_start()
+        velocities = self._applied()
+        if self.started and not self.done:
+            result = self.sim.step(velocities, self.s.dt_ns / 1e9)
+            self.t_ns += self.s.dt_ns
+            if result.collisions:
+                msg = collisions_message(result.collisions, self._stamp_ns())
+                self.collision_pub.publish(serialize(msg))
+            self._check_done(bool(result.collisions))
+        self._publish_state(velocities)
+
+    def _maybe_start(self) -> None:
+        """Start the episode once every arm's command topic has a publisher (a planner is up)
+        plus ``start_delay`` for discovery to settle, or after ``start_timeout``."""
+        now = time.monotonic()
+        missing = [a for a in self.cell.arm_ids if self.node.count_publishers(command_topic(a)) < 1]
+        if self.s.wait_for_planners and now - self.created < self.s.start_timeout:
+            if missing:
+                self._ready_at = math.inf
+                self.node.get_logger().info(
+                    f"waiting for planners of {missing}", throttle_duration_sec=5.0
+                )
+                return
+            self._ready_at = min(self._ready_at, now)
+            if now - self._ready_at < self.s.start_delay:
+                return
+        elif missing:
+            self.node.get_logger().warning(f"starting without planners for {missing}")
+        self.started = True
+        self.node.get_logger().info("episode started")
+
+    def _check_done(self, collided: bool) -> None:
+        s, t = self.s, self.t_ns / 1e9
+        reached = all(
+            goal_distance(self.sim.q[a], self.scenario.goal[a], self.cell, a, s.success_norm)
+            < s.success_tolerance
+            for a in self.cell.arm_ids
+        )
+        if collided and s.stop_on_collision:
+            self.outcome = "collision"
+        elif reached:
+            self.outcome = "success"
+        elif t >= s.time_limit - 1e-9:
+            self.outcome = "time_limit"
+        if self.outcome:
+            self.done = True
+            self._done_at = time.monotonic()
+            dropped = sum(self.dropped.values())
+            self.node.get_logger().info(
+                f"episode done: {self.outcome} after {t:.2f} s ({dropped} commands dropped)"
+            )
+            print(f"sim_bridge: episode {self.outcome} t={t:.3f}", flush=True)
+
+    @property
+    def finished(self) -> bool:
+        """True 0.5 s after the end of the episode with ``exit_when_done`` (the held state
+        keeps going out meanwhile, so every subscriber has the final state)."""
+        return self.s.exit_when_done and time.monotonic() - self._done_at > 0.5
+
+    def on_stop(self) -> None:
+        self.timer.cancel()
+        self.sim.close()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the `sim_bridge` console script; `argv` is ignored for now."""
-    del argv
-    print("sim_bridge bridge: not implemented yet; see the README's Limitations", file=sys.stderr)
-    return 2
+    """Entry point of the `sim_bridge` console script."""
+    return run_main("sim_bridge", SimBridgeNode, argv)
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(main())

@@ -72,8 +72,9 @@ LR_SCHEDULES = ("constant", "cosine", "exponential")
 class TrainSettings:
     """Everything that defines a training run (stored in every checkpoint's JSON sidecar).
 
-    Presets: :meth:`preset` ``"cpu"`` (the default values, sized for 2 CPU cores) and
-    ``"authors"`` (3×512, 65k batch, lr 2e-5, the authors' proportions).
+    Presets: :meth:`preset` ``"cpu"`` (3×64, batch 500, Adam 3e-4 cosine-decayed, tuned for
+    one CPU thread), ``"cpu_legacy"`` (the dataclass defaults: 3×128, batch 10k, constant 1e-4)
+    and ``"authors"`` (3×512, 65k batch, lr 2e-5, the authors' proportions).
     """
 
     variant: str = "bc+sym"
@@ -148,7 +149,20 @@ class TrainSettings:
 
 
 PRESETS: dict[str, TrainSettings] = {
-    "cpu": TrainSettings(),
+    # Tuned on Air3D for one CPU thread (bench/results/hjr_tuning.md): a small SIREN and many
+    # small steps with a cosine-decayed rate beat a wide network and few large steps at the
+    # same sample budget; most of the time budget goes to the full horizon.
+    "cpu": TrainSettings(
+        network=NetworkSettings(width=64, hidden_layers=3),
+        batch_size=500,
+        learning_rate=3e-4,
+        lr_schedule="cosine",
+        lr_final_fraction=0.01,
+        pretrain_fraction=0.02,
+        curriculum_fraction=0.5,
+    ),
+    # The first CPU defaults (3×128, batch 10k, constant 1e-4): resumes runs started with them.
+    "cpu_legacy": TrainSettings(),
     "authors": TrainSettings(
         network=NetworkSettings(width=512, hidden_layers=3, input_scaling="raw"),
         batch_size=65_000,
@@ -620,7 +634,7 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="run directory")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--resume", action="store_true", help="continue from out/checkpoint")
-    parser.add_argument("--preset", default="cpu", help="settings preset: cpu | authors")
+    parser.add_argument("--preset", default="cpu", help=f"settings preset: {sorted(PRESETS)}")
     parser.add_argument("--width", type=int, help="SIREN width")
     parser.add_argument("--hidden-layers", type=int, help="SIREN width×width layers")
     parser.add_argument("--batch-size", type=int, help="states per step")

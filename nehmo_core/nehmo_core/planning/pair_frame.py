@@ -9,7 +9,7 @@ about their vertical base axes. For an arm whose first joint turns about its bas
 through the base origin (UR5, Kinova Gen3), that is a shift of the first joint:
 ``q¹₁ → q¹₁ − s¹·φ``, ``q²₁ → q²₁ + s²·ψ`` (``s = ±1``: the joint axis along ±z). Distances,
 and so values, are unchanged by the rigid motion; gradients are unchanged by a shift. E.g. in
-the three- and five-UR5 cells the centre arm's shift is 0, π or ±π/2 (as in the paper's experiments).
+the three- and five-UR5 cells the centre arm's shift is 0, π or ±π/2 (as in the paper).
 """
 
 from __future__ import annotations

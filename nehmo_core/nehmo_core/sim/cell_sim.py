@@ -57,7 +57,9 @@ class CellSimulator:
         """Set every arm's joint positions [rad] (all arms must be given)."""
         missing = set(self.cell.arm_ids) - set(q)
         if missing:
-            raise InvalidValueError("q", f"must give every arm (missing {sorted(missing)})", list(q))
+            raise InvalidValueError(
+                "q", f"must give every arm (missing {sorted(missing)})", list(q)
+            )
         for arm_id, qa in q.items():
             self.q[arm_id] = self.cell.arm(arm_id).robot.check_q(qa, f"q[{arm_id}]").copy()
         self.world.set_configuration(self.q)

@@ -13,6 +13,7 @@ from typing import Any
 
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.types import byte, float64, int32, sequence, uint32
+
 from nehmo_core.logs.messages import MESSAGE_TYPES, RosMessage
 
 

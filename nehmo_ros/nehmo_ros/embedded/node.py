@@ -15,7 +15,6 @@ from typing import Any
 
 from nehmo_core.logs.messages import Clock as ClockMsg
 from nehmo_core.logs.messages import msgtype_of
-
 from nehmo_ros.embedded.arguments import LOG_LEVELS, parse_ros_args, resolve_overrides
 from nehmo_ros.embedded.clock import Clock, ClockType, ROSClock
 from nehmo_ros.embedded.context import Context, default_context
@@ -182,7 +181,6 @@ class Publisher:
     def publish(self, msg: Any) -> None:
         """Send `msg` (an instance of the publisher's type, or its CDR bytes)."""
         from nehmo_core.logs.messages import deserialize
-
         from nehmo_ros.embedded.idl import to_idl
 
         if isinstance(msg, bytes | bytearray | memoryview):

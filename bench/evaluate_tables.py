@@ -1,0 +1,193 @@
+"""The paper's Tables II–IV with this implementation, every baseline side by side.
+
+    OMP_NUM_THREADS=1 ./run python bench/evaluate_tables.py --workers 2 \\
+        --value-model nehmo=RUN_BC_SYM --value-model nehmo_no_sym=RUN_BC \\
+        --value-model opt_deepreach=RUN_DEEPREACH --value-model nehmo=RUN_KINOVA_PAIRS...
+
+For each table (``--tables II,III,IV``) and setup, every row runs on the same seeded scenario
+set (``--episodes`` each, default 100, ``--seed`` 0) through ``nehmo evaluate``'s machinery:
+25 Hz control with one tick of planning latency, exact collision checks at sub-steps, one MCAP
+log per episode (under ``--logs``, not committed), metrics computed from the logs. Written to
+``--out`` (default ``bench/results/``):
+
+* ``scenarios/<setup>_seed<seed>.json``: the scenario sets;
+* ``table_<id>_<setup>.json`` / ``.md``: per-row metrics beside the paper's, with wall times;
+* ``table_<id>.md``: the table; ``table_<id>.png``: bars of our SR/CR against the paper's;
+* ``renders/<setup>.gif`` and ``renders/<setup>_distance.png``: the first NeHMO episode.
+
+Smoke run (random stand-in value models; numbers mean nothing):
+
+    OMP_NUM_THREADS=1 ./run python bench/evaluate_tables.py --episodes 2 \\
+        --value-model synthetic --out /tmp/tables_smoke --logs /tmp/tables_smoke/logs
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+from nehmo_core.errors import NehmoError
+from nehmo_core.eval.batch import BatchConfig, RowRun, run_rows
+from nehmo_core.eval.paper import TABLES, paper_row
+from nehmo_core.eval.planners import parse_value_models, snapshot_value_models
+from nehmo_core.eval.render import render_episode
+from nehmo_core.eval.report import markdown_table, setup_summary, write_summary
+from nehmo_core.eval.scenario_sets import scenario_set_for
+from nehmo_core.eval.setups import OPT_KINDS, get_setup, parse_row
+from nehmo_core.robots.loader import cache_dir
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def _bars(table: str, summaries: list[dict[str, Any]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, axes = plt.subplots(1, len(summaries), figsize=(5.5 * len(summaries), 3.6), squeeze=False)
+    for ax, summary in zip(axes[0], summaries, strict=True):
+        rows = summary["rows"]
+        x = np.arange(len(rows))
+        w = 0.2
+
+        def value(row: dict[str, Any], key: str, ours: bool) -> float:
+            src = row["ours"] if ours else (row["paper"] or {})
+            v = src.get(key)
+            return float("nan") if v is None else float(v)
+
+        series = [
+            ("SR ours", "sr", True, "#2a7ab9", None),
+            ("SR paper", "sr", False, "#9cc3e4", "//"),
+            ("CR ours", "cr", True, "#c0392b", None),
+            ("CR paper", "cr", False, "#eba59d", "//"),
+        ]
+        for k, (label, key, ours, colour, hatch) in enumerate(series):
+            ax.bar(
+                x + (k - 1.5) * w,
+                [value(r, key, ours) for r in rows],
+                w,
+                label=label,
+                color=colour,
+                hatch=hatch,
+                edgecolor="white",
+            )
+        ax.set_xticks(x, [r["row"] for r in rows], rotation=20, fontsize=8)
+        ax.set_ylim(0, 125)
+        ax.set_yticks(range(0, 101, 20))
+        ax.set_ylabel("%")
+        n = rows[0]["ours"]["episodes"] if rows else 0
+        ax.set_title(f"Table {table}: {summary['setup']} ({n} episodes)", fontsize=9)
+        ax.legend(fontsize=7, ncol=4, loc="upper center")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _render(setup: str, runs: list[RowRun], out: Path) -> list[Path]:
+    """The first episode of the first Opt row (else the first row)."""
+    run = next((r for r in runs if any(k in OPT_KINDS for k in r.kinds.values())), runs[0])
+    made = render_episode(run.logs[0], out / "renders" / "tmp")
+    final = []
+    for p in made:
+        suffix = "_distance.png" if p.name.endswith("_distance.png") else ".gif"
+        target = out / "renders" / f"{setup}{suffix}"
+        p.replace(target)
+        final.append(target)
+    (out / "renders" / "tmp").rmdir()
+    return final
+
+
+def run_table(table: str, args: argparse.Namespace) -> list[dict[str, Any]]:
+    summaries = []
+    for setup_name, all_rows in TABLES[table]:
+        rows = [r for r in all_rows if r not in args.skip_rows]
+        setup = get_setup(setup_name)
+        cell = setup.load_cell()
+        for row in rows:
+            parse_row(row, cell)
+        scenarios = scenario_set_for(setup, args.seed, args.episodes, args.out / "scenarios")
+        config = BatchConfig(
+            setup=setup_name,
+            out_dir=args.logs / f"seed{args.seed}" / setup_name,
+            value_models=snapshot_value_models(
+                parse_value_models(args.value_model), args.logs / "value_models"
+            ),
+            backend=args.backend,
+        )
+        start = time.perf_counter()
+        runs = run_rows(config, rows, scenarios, args.workers, not args.no_progress)
+        summary = setup_summary(
+            setup_name,
+            runs,
+            {
+                "table": table,
+                "seed": scenarios.seed,
+                "episodes": len(scenarios),
+                "scenario_candidates": scenarios.candidates,
+                "workers": args.workers,
+                "value_model_sources": args.value_model,
+                "load_average_at_start": os.getloadavg(),
+                "wall_seconds": time.perf_counter() - start,
+                "logs": str(config.out_dir),
+            },
+        )
+        write_summary(args.out, summary, stem=f"table_{table}_{setup_name}")
+        if not args.no_render:
+            for p in _render(setup_name, runs, args.out):
+                print(f"rendered {p}", file=sys.stderr)
+        summaries.append(summary)
+    return summaries
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--tables", default="II,III,IV", help="comma-separated: II, III, IV")
+    parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument("--seed", type=int, default=0, help="scenario set")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--value-model", action="append", default=[], metavar="[KIND=]SOURCE")
+    parser.add_argument("--backend", default="auto", choices=("auto", "compiled", "vm"))
+    parser.add_argument("--skip-rows", default="", help="comma-separated rows to leave out")
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--logs", type=Path, default=cache_dir() / "eval_logs")
+    parser.add_argument("--no-render", action="store_true")
+    parser.add_argument("--no-progress", action="store_true")
+    args = parser.parse_args(argv)
+    args.skip_rows = {r for r in args.skip_rows.split(",") if r}
+    tables = [t.strip() for t in args.tables.split(",") if t.strip()]
+    unknown = [t for t in tables if t not in TABLES]
+    if unknown:
+        print(f"unknown tables {unknown}; valid: {sorted(TABLES)}", file=sys.stderr)
+        return 2
+    try:
+        for table in tables:
+            summaries = run_table(table, args)
+            text = f"## Table {table}\n\n" + "\n".join(markdown_table(s) for s in summaries)
+            (args.out / f"table_{table}.md").write_text(text)
+            (args.out / f"table_{table}.json").write_text(
+                json.dumps({"table": table, "setups": summaries}, indent=1) + "\n"
+            )
+            _bars(table, summaries, args.out / f"table_{table}.png")
+            print(text)
+    except NehmoError as exc:
+        print(f"evaluate_tables: error: {exc}", file=sys.stderr)
+        return 2
+    missing = [
+        (s, r) for t in tables for s, rows in TABLES[t] for r in rows if paper_row(s, r) is None
+    ]
+    if missing:
+        print(f"rows without paper numbers (extras): {missing}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

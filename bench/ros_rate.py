@@ -1,0 +1,183 @@
+"""Do the planners hold 25 Hz? Three arms, the bridge and the recorder for 60 s of wall time.
+
+    python bench/ros_rate.py [--seconds 60] [--cell triple_ur5] [--model synthetic]
+
+Starts the node suite as separate processes (embedded runtime, loopback, own DDS domain) in
+real time (wall-clock stamps, no /clock), lets it run ``--seconds``, stops it with SIGINT and
+reads the MCAP log. Per arm it reports the command periods measured two ways: at the planner
+(its timer's publish instants, ``publish_wall_ns`` in ``/<arm>/planner/status``) and at the
+recorder (receive times of ``/<arm>/velocity_controller/commands``), as percentiles and as the
+share within 40 ± 5 ms (target ≥ 99 %), plus deadline misses and fail-safes. Results go to
+``bench/results/ros_rate.json`` and ``.md``. The episode is scenario 0 of seed 0 of the cell;
+arms that reach their goals keep planning (and commanding zero) until the end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nehmo_core.logs import iter_log
+from nehmo_core.logs.messages import DiagnosticStatus
+from nehmo_core.robots import load_cell
+from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
+from nehmo_ros.orchestrate import Process, SuiteSettings, child_env, isolated_domain, node_command
+
+RESULTS = Path(__file__).resolve().parent / "results"
+PERIOD_MS, TOLERANCE_MS = 40.0, 5.0
+
+
+def period_stats(periods_ms: np.ndarray) -> dict[str, Any]:
+    """Percentiles [ms] and the share within 40 ± 5 ms."""
+    if len(periods_ms) == 0:
+        return {"count": 0}
+    within = np.abs(periods_ms - PERIOD_MS) <= TOLERANCE_MS
+    q = np.percentile(periods_ms, [0.1, 1, 50, 99, 99.9])
+    return {
+        "count": len(periods_ms),
+        "within_40pm5_pct": float(100.0 * within.mean()),
+        "p0.1_p1_p50_p99_p99.9_ms": [round(float(x), 2) for x in q],
+        "min_ms": round(float(periods_ms.min()), 2),
+        "max_ms": round(float(periods_ms.max()), 2),
+    }
+
+
+def analyse(log: Path, arm_ids: list[str], skip_s: float) -> dict[str, Any]:
+    """Per-arm period statistics from the log (the first ``skip_s`` seconds left out)."""
+    publish: dict[str, list[int]] = {a: [] for a in arm_ids}
+    receive: dict[str, list[int]] = {a: [] for a in arm_ids}
+    last_status: dict[str, dict[str, str]] = {}
+    for rec in iter_log(log):
+        arm = rec.topic.split("/")[1] if rec.topic.count("/") >= 2 else ""
+        if arm not in publish:
+            continue
+        if rec.topic.endswith("/velocity_controller/commands"):
+            receive[arm].append(rec.log_time_ns)
+        elif rec.topic.endswith("/planner/status") and isinstance(rec.message, DiagnosticStatus):
+            values = {kv.key: kv.value for kv in rec.message.values}
+            publish[arm].append(int(values["publish_wall_ns"]))
+            last_status[arm] = values
+    out: dict[str, Any] = {}
+    for a in arm_ids:
+        stats: dict[str, Any] = {}
+        for name, stamps in (("at_planner", publish[a]), ("at_recorder", receive[a])):
+            t = np.sort(np.asarray(stamps, dtype=np.int64))
+            t = t[t >= t[0] + skip_s * 1e9] if len(t) else t
+            stats[name] = period_stats(np.diff(t) / 1e6)
+        values = last_status.get(a, {})
+        stats["ticks"] = int(values.get("ticks", 0))
+        stats["deadline_misses"] = int(values.get("deadline_misses", 0))
+        stats["fail_safes"] = int(values.get("fail_safes", 0))
+        out[a] = stats
+    return out
+
+
+def run(cell_name: str, model: str, seconds: float, out: Path) -> dict[str, Any]:
+    cell = load_cell(cell_name)
+    settings = SuiteSettings(model=model)
+    domain = isolated_domain()
+    env = child_env(settings, domain)
+    scenario_file = save_scenario_set(generate_scenario_set(cell, 0, 1), out / "scenarios.json")
+    log = out / "ros_rate.mcap"
+    procs: list[Process] = []
+    try:
+        recorder = Process(
+            "recorder",
+            node_command(
+                "nehmo_ros.recorder",
+                {"cell": cell.name, "output": str(log), "stamp_source": "receive"},
+            ),
+            env,
+            out / "recorder.log",
+            0,
+        )
+        procs.append(recorder)
+        if not recorder.wait_for("recording", 60):
+            raise RuntimeError(recorder.output())
+        for arm_id in cell.arm_ids:
+            params = {
+                "arm_id": arm_id,
+                "cell": cell.name,
+                "planner": "nehmo",
+                "model": model,
+                "allow_unmodelled": True,  # the outer arms of triple_ur5 are 1.2 m apart
+            }
+            argv = node_command("nehmo_ros.arm_planner", params, ["-r", f"__node:=p_{arm_id}"])
+            procs.append(Process(arm_id, argv, env, out / f"planner_{arm_id}.log", 0))
+        for p in procs[1:]:
+            if not p.wait_for("of cell", 120):
+                raise RuntimeError(p.output())
+        bridge_params = {
+            "cell": cell.name,
+            "scenarios": str(scenario_file),
+            "time_limit": 3600.0,
+            "planners": "nehmo",
+        }
+        argv = node_command("sim_bridge.bridge", bridge_params)
+        procs.append(Process("bridge", argv, env, out / "bridge.log", 0))
+        if not procs[-1].wait_for("episode started", 60):
+            raise RuntimeError(procs[-1].output())
+        time.sleep(seconds)
+    finally:
+        codes = {p.name: p.stop(10.0) for p in reversed(procs)}
+    per_arm = analyse(log, list(cell.arm_ids), skip_s=1.0)
+    return {"cell": cell.name, "model": model, "seconds": seconds, "exit_codes": codes, **per_arm}
+
+
+def markdown(result: dict[str, Any]) -> str:
+    lines = [
+        f"# Command periods over {result['seconds']:.0f} s, cell {result['cell']}",
+        "",
+        f"{result['machine']}; model {result['model']}; target: ≥ 99 % within 40 ± 5 ms.",
+        "",
+        "| arm | where | periods | within 40±5 ms | p0.1 / p1 / p50 / p99 / p99.9 [ms] | max |"
+        " misses | fail-safes |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for arm, stats in result.items():
+        if not isinstance(stats, dict) or "at_planner" not in stats:
+            continue
+        for where in ("at_planner", "at_recorder"):
+            s = stats[where]
+            lines.append(
+                f"| {arm} | {where} | {s.get('count', 0)} | {s.get('within_40pm5_pct', 0):.2f} %"
+                f" | {s.get('p0.1_p1_p50_p99_p99.9_ms')} | {s.get('max_ms')} |"
+                f" {stats['deadline_misses']} | {stats['fail_safes']} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--cell", default="triple_ur5")
+    parser.add_argument("--model", default="synthetic")
+    parser.add_argument("--keep", help="directory for the log and the process outputs")
+    args = parser.parse_args()
+    out = Path(args.keep or tempfile.mkdtemp(prefix="ros_rate_"))
+    out.mkdir(parents=True, exist_ok=True)
+    result = run(args.cell, args.model, args.seconds, out)
+    load = os.getloadavg()
+    result["machine"] = (
+        f"{platform.machine()}, {os.cpu_count()} cores, load average {load[0]:.1f} at the end,"
+        f" python {platform.python_version()}, niceness {os.nice(0)}"
+    )
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "ros_rate.json").write_text(json.dumps(result, indent=1) + "\n")
+    (RESULTS / "ros_rate.md").write_text(markdown(result))
+    print(markdown(result))
+    print(f"log and process outputs: {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

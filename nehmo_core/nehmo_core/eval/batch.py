@@ -1,0 +1,235 @@
+"""Batches of episodes over a process pool: one episode per task, one MCAP log per episode.
+
+Each worker process keeps its simulators, value models (compiled once, cached on disk) and
+decentralized planners between episodes; centralized planners plan each scenario anew. The
+metrics of a row are computed from its logs (:func:`nehmo_core.eval.metrics.evaluate_log`) and
+checked against the runner's in-memory results.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from nehmo_core.eval.episode import EpisodeSettings, run_episode
+from nehmo_core.eval.metrics import EpisodeResult, RowMetrics, aggregate, evaluate_log
+from nehmo_core.eval.planners import (
+    ModelRegistry,
+    ValueModelSource,
+    build_planners,
+    unmodelled_peers,
+)
+from nehmo_core.eval.setups import OPT_KINDS, get_setup, is_centralized, parse_row, row_slug
+from nehmo_core.planning.interface import Planner
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.robots import load_cell
+from nehmo_core.sim.cell_sim import CellSimulator
+from nehmo_core.sim.scenarios import Scenario, ScenarioSet
+
+__all__ = ["BatchConfig", "RowRun", "run_rows"]
+
+
+@dataclass(frozen=True)
+class BatchConfig:
+    """What every episode of a batch shares."""
+
+    setup: str
+    out_dir: Path
+    value_models: tuple[ValueModelSource, ...] = ()
+    backend: str = "auto"
+    planner_settings: PlannerSettings = field(default_factory=PlannerSettings)
+    episode_overrides: tuple[tuple[str, Any], ...] = ()  # EpisodeSettings fields to override
+
+    def episode_settings(self) -> EpisodeSettings:
+        return EpisodeSettings.for_setup(get_setup(self.setup), **dict(self.episode_overrides))
+
+
+@dataclass(frozen=True)
+class _Job:
+    row: str
+    position: int  # in the scenario set
+    index: int  # the scenario's number (its seed)
+    set_seed: int
+    scenario: Scenario
+    log_path: Path
+
+
+@dataclass
+class RowRun:
+    """One row's episodes: results from the logs, the in-memory check and the wall time."""
+
+    row: str
+    kinds: dict[str, str]
+    results: list[EpisodeResult]  # from the logs, in scenario order
+    logs: list[Path]
+    metrics: RowMetrics
+    mismatches: list[int]  # positions whose log result differs from the in-memory one
+    wall_seconds: float
+    episode_seconds: list[float]
+    value_models: dict[str, Any]
+    unmodelled_peers: dict[str, list[str]]  # per Opt arm: peers in reach it does not constrain
+
+
+# -- worker side ---------------------------------------------------------------------------------
+_STATE: dict[str, Any] = {}
+
+
+def _init_worker() -> None:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import torch
+
+    torch.set_num_threads(1)
+
+
+def _registry(config: BatchConfig) -> ModelRegistry:
+    key = (config.value_models, config.backend)
+    if _STATE.get("registry_key") != key:
+        _STATE["registry_key"] = key
+        _STATE["registry"] = ModelRegistry(config.value_models, config.backend)
+        _STATE["planners"] = {}
+    registry: ModelRegistry = _STATE["registry"]
+    return registry
+
+
+def _simulator(cell_name: str, settings: EpisodeSettings) -> CellSimulator:
+    sims: dict[tuple[str, int, bool], CellSimulator] = _STATE.setdefault("sims", {})
+    key = (cell_name, settings.substeps, settings.self_collision)
+    if key not in sims:
+        sims[key] = CellSimulator(load_cell(cell_name), settings.substeps, settings.self_collision)
+    return sims[key]
+
+
+def _run_job(config: BatchConfig, job: _Job) -> tuple[int, EpisodeResult, float, dict[str, Any]]:
+    start = time.perf_counter()
+    setup = get_setup(config.setup)
+    cell = load_cell(setup.cell)
+    settings = config.episode_settings()
+    kinds = parse_row(job.row, cell)
+    registry = _registry(config)
+    cache: dict[str, Planner] = _STATE["planners"].setdefault((setup.name, job.row), {})
+    planners = build_planners(
+        cell,
+        kinds,
+        job.scenario,
+        1.0 / settings.rate,
+        registry,
+        config.planner_settings,
+        None if is_centralized(kinds) else cache,
+        allow_unmodelled=setup.unmodelled_peers_ok,
+    )
+    models = {k: registry.described.get(k, []) for k in set(kinds.values()) if k in OPT_KINDS}
+    unmodelled = unmodelled_peers(planners)
+    metadata = {
+        "setup": setup.name,
+        "row": job.row,
+        "scenario_set": {"seed": job.set_seed, "index": job.index, "position": job.position},
+        "value_models": models,
+        "unmodelled_peers": unmodelled,
+        "planner_settings": config.planner_settings.to_dict(),
+    }
+    result = run_episode(
+        cell,
+        job.scenario,
+        planners,
+        settings,
+        kinds=kinds,
+        timed_arms=setup.timed_arms or cell.arm_ids,
+        simulator=_simulator(setup.cell, settings),
+        log_path=job.log_path,
+        metadata=metadata,
+    )
+    used = {"value_models": models, "unmodelled_peers": unmodelled}
+    return job.position, result, time.perf_counter() - start, used
+
+
+# -- driver side ---------------------------------------------------------------------------------
+def _executor(workers: int) -> Executor | None:
+    if workers <= 1:
+        return None
+    return ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_init_worker,
+    )
+
+
+def _jobs(config: BatchConfig, row: str, scenarios: ScenarioSet) -> list[_Job]:
+    logs = config.out_dir / "logs" / row_slug(row)
+    return [
+        _Job(row, k, index, scenarios.seed, sc, logs / f"episode_{index:04d}.mcap")
+        for k, (index, sc) in enumerate(zip(scenarios.indices, scenarios.scenarios, strict=True))
+    ]
+
+
+def run_rows(
+    config: BatchConfig,
+    rows: Sequence[str],
+    scenarios: ScenarioSet,
+    workers: int = 1,
+    progress: bool = True,
+    on_row: Callable[[RowRun], None] | None = None,
+) -> list[RowRun]:
+    """Run every row on every scenario; rows one after the other, episodes in parallel."""
+    from tqdm import tqdm
+
+    cell = load_cell(get_setup(config.setup).cell)
+    kinds_of = {row: parse_row(row, cell) for row in rows}  # fail early on a bad row
+    executor = _executor(workers)
+    runs = []
+    try:
+        for row in rows:
+            jobs = _jobs(config, row, scenarios)
+            start = time.perf_counter()
+            memory: dict[int, EpisodeResult] = {}
+            seconds: dict[int, float] = {}
+            models: dict[str, Any] = {}
+            unmodelled: dict[str, list[str]] = {}
+            with tqdm(total=len(jobs), desc=f"{config.setup} {row}", disable=not progress) as bar:
+                if executor is None:
+                    outputs: Any = (_run_job(config, job) for job in jobs)
+                else:
+                    futures = [executor.submit(_run_job, config, job) for job in jobs]
+                    outputs = (f.result() for f in as_completed(futures))
+                for position, result, wall, used in outputs:
+                    memory[position], seconds[position] = result, wall
+                    models.update(used["value_models"])
+                    unmodelled.update(used["unmodelled_peers"])
+                    bar.update(1)
+                    bar.set_postfix_str(_postfix(memory.values()))
+            logs = [job.log_path for job in jobs]
+            from_logs = [evaluate_log(p) for p in logs]
+            mismatches = [k for k, r in enumerate(from_logs) if r != memory[k]]
+            run = RowRun(
+                row=row,
+                kinds=kinds_of[row],
+                results=from_logs,
+                logs=logs,
+                metrics=aggregate(from_logs),
+                mismatches=mismatches,
+                wall_seconds=time.perf_counter() - start,
+                episode_seconds=[seconds[k] for k in range(len(jobs))],
+                value_models=models,
+                unmodelled_peers=unmodelled,
+            )
+            runs.append(run)
+            if on_row is not None:
+                on_row(run)
+    finally:
+        if executor is not None:
+            executor.shutdown(cancel_futures=True)
+    return runs
+
+
+def _postfix(results: Any) -> str:
+    outcomes = [r.outcome for r in results]
+    n = len(outcomes) or 1
+    return (
+        f"SR {100 * outcomes.count('success') / n:.0f}% "
+        f"CR {100 * outcomes.count('collision') / n:.0f}%"
+    )

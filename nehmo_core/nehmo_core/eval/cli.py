@@ -1,0 +1,164 @@
+"""``nehmo evaluate``: episodes of one setup for several planner rows, metrics from the logs.
+
+    nehmo evaluate --setup dual_ur5 --planners nehmo,naive,chomp --episodes 100 --seed 0 \\
+        --out out/eval_dual --workers 2 --value-model /work/data/runs/ur5_ur5_bc_sym
+
+writes ``DIR/scenarios/<setup>_seed<seed>.json`` (the scenario set ``--seed`` selects),
+``DIR/logs/<row>/episode_<i>.mcap`` (one MCAP log per episode), ``DIR/summary.json`` and
+``DIR/summary.md`` (our numbers with the paper's beside them), and with ``--render`` a GIF and a
+distance plot of the first episode of every row under ``DIR/renders/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from nehmo_core.errors import InvalidValueError, NehmoError
+from nehmo_core.eval.batch import BatchConfig, RowRun, run_rows
+from nehmo_core.eval.planners import parse_value_models, snapshot_value_models
+from nehmo_core.eval.report import markdown_table, setup_summary, write_summary
+from nehmo_core.eval.scenario_sets import scenario_set_for
+from nehmo_core.eval.setups import SETUPS, get_setup, parse_row, row_slug
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.sim.scenarios import ScenarioSet, load_scenario_set
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--setup", required=True, choices=sorted(SETUPS), help="evaluation setup")
+    parser.add_argument(
+        "--planners",
+        default="nehmo,naive",
+        help="comma-separated rows; a row is a kind for every arm or kinds per arm joined by "
+        "'/' (e.g. nehmo/reckless). Kinds: nehmo, nehmo_no_sym, opt_deepreach, naive, "
+        "reckless, chomp, ompl",
+    )
+    parser.add_argument("--episodes", type=int, default=100, help="scenarios per row")
+    parser.add_argument("--seed", type=int, default=0, help="selects the scenario set")
+    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument("--workers", type=int, default=1, help="worker processes")
+    parser.add_argument(
+        "--value-model",
+        action="append",
+        default=[],
+        metavar="[KIND=]SOURCE",
+        help="value model source for the Opt rows: a shipped pair name, a run directory, a "
+        ".safetensors file, or 'synthetic' (random stand-ins, smoke runs only); repeatable",
+    )
+    parser.add_argument(
+        "--scenarios", type=Path, help="a scenario file to use instead of generating the set"
+    )
+    parser.add_argument(
+        "--backend", default="auto", choices=("auto", "compiled", "vm"), help="V/∇V evaluation"
+    )
+    parser.add_argument(
+        "--deadline", type=float, help="planner deadline [s] (default: one 25 Hz tick, 0.04)"
+    )
+    parser.add_argument("--render", action="store_true", help="render each row's first episode")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def _scenarios(args: argparse.Namespace) -> ScenarioSet:
+    setup = get_setup(args.setup)
+    if args.scenarios is not None:
+        saved = load_scenario_set(args.scenarios)
+        if saved.cell != setup.cell:
+            raise InvalidValueError(
+                "--scenarios", f"must hold scenarios of cell {setup.cell!r}", saved.cell
+            )
+        return saved.head(min(args.episodes, len(saved)))
+
+    def progress(kept: int, drawn: int) -> None:
+        if not args.no_progress:
+            print(f"\rscenarios: {kept}/{args.episodes} kept of {drawn}", end="", file=sys.stderr)
+
+    made = scenario_set_for(setup, args.seed, args.episodes, args.out / "scenarios", None, progress)
+    if not args.no_progress:
+        print(file=sys.stderr)
+    return made
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.episodes < 1:
+        raise InvalidValueError("--episodes", "must be >= 1", args.episodes)
+    if args.workers < 1:
+        raise InvalidValueError("--workers", "must be >= 1", args.workers)
+    rows = [r.strip() for r in args.planners.split(",") if r.strip()]
+    if not rows:
+        raise InvalidValueError("--planners", "must name at least one row", args.planners)
+    cell = get_setup(args.setup).load_cell()
+    for row in rows:  # fail before any work on a bad row
+        parse_row(row, cell)
+    planner_settings = PlannerSettings()
+    if args.deadline is not None:
+        planner_settings = planner_settings.replace(deadline=args.deadline)
+    config = BatchConfig(
+        setup=args.setup,
+        out_dir=args.out,
+        value_models=snapshot_value_models(
+            parse_value_models(args.value_model), args.out / "value_models"
+        ),
+        backend=args.backend,
+        planner_settings=planner_settings,
+    )
+    scenarios = _scenarios(args)
+
+    def report(run: RowRun) -> None:
+        m = run.metrics
+        print(
+            f"{args.setup} {run.row}: SR {m.sr:.0f}% CR {m.cr:.0f}% stuck {m.stuck_rate:.0f}% "
+            f"time {m.plan_time_ms[0]:.1f} ± {m.plan_time_ms[1]:.1f} ms, "
+            f"{run.wall_seconds:.0f} s wall",
+            file=sys.stderr,
+        )
+
+    start = time.perf_counter()
+    runs = run_rows(config, rows, scenarios, args.workers, not args.no_progress, report)
+    summary = setup_summary(
+        args.setup,
+        runs,
+        {
+            "seed": scenarios.seed,
+            "episodes": len(scenarios),
+            "scenario_candidates": scenarios.candidates,
+            "workers": args.workers,
+            "value_model_sources": [str(s) for s in config.value_models],
+            "episode_settings": config.episode_settings().to_dict(),
+            "planner_settings": planner_settings.to_dict(),
+            "wall_seconds": time.perf_counter() - start,
+        },
+    )
+    path = write_summary(args.out, summary)
+    print(markdown_table(summary))
+    print(f"wrote {path} and {path.with_suffix('.md')}", file=sys.stderr)
+    if args.render:
+        from nehmo_core.eval.render import render_episode
+
+        for r in runs:
+            outputs = render_episode(r.logs[0], args.out / "renders" / row_slug(r.row))
+            print(f"rendered {', '.join(str(o) for o in outputs)}", file=sys.stderr)
+    bad = [r.row for r in runs if r.mismatches]
+    if bad:
+        print(f"log check failed for rows {bad}: see summary.json", file=sys.stderr)
+        return 1
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m nehmo_core.eval.cli``: the same command outside ``nehmo``."""
+    parser = argparse.ArgumentParser(prog="nehmo evaluate", description=__doc__.split("\n")[0])
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        return run(args)
+    except NehmoError as exc:
+        print(f"nehmo evaluate: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

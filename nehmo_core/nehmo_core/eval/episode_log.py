@@ -1,0 +1,230 @@
+"""One episode as an MCAP log in the project's schema (:mod:`nehmo_core.logs.topics`).
+
+Written per episode, in simulated time (``log_time`` = stamp [ns] from the episode start):
+
+============================================ =====================================================
+``/nehmo/scenario``                          the episode's metadata as JSON (cell, planners, rules)
+``/<arm>/goal``                              goal configuration, once at t = 0
+``/clock``, ``/<arm>/joint_states``          every control tick: positions [rad], and as velocity
+                                             the command applied during the tick that ended there
+``/<arm>/velocity_controller/commands``      each plan() result [rad/s], stamped when it takes
+                                             effect (the tick after its observation)
+``/<arm>/planner/status``                    its telemetry (:mod:`nehmo_core.eval.telemetry`)
+``/nehmo/collisions``                        the colliding pairs, at the end of the colliding tick
+============================================ =====================================================
+
+:func:`read_episode_log` reads any log with these topics back, so a ROS recording is evaluated
+like a batch one.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from nehmo_core.errors import NehmoError
+from nehmo_core.eval.telemetry import (
+    StatusRecord,
+    collisions_from_message,
+    collisions_message,
+    stamp,
+    telemetry_from_status,
+)
+from nehmo_core.geometry.pybullet_world import Collision
+from nehmo_core.logs import (
+    CLOCK_TOPIC,
+    COLLISIONS_TOPIC,
+    Clock,
+    DiagnosticArray,
+    DiagnosticStatus,
+    Float64MultiArray,
+    Header,
+    JointState,
+    LogWriter,
+    command_topic,
+    goal_topic,
+    iter_log,
+    joint_states_topic,
+    read_scenario,
+    status_topic,
+)
+from nehmo_core.logs.topics import split_arm_topic
+from nehmo_core.robots.loader import cell_from_dict
+from nehmo_core.robots.model import Cell
+
+__all__ = [
+    "EPISODE_FORMAT",
+    "EPISODE_FORMAT_VERSION",
+    "EpisodeLog",
+    "EpisodeLogError",
+    "EpisodeLogWriter",
+    "cell_metadata",
+    "read_episode_log",
+]
+
+EPISODE_FORMAT = "nehmo-episode"
+EPISODE_FORMAT_VERSION = 1
+
+
+class EpisodeLogError(NehmoError):
+    """An episode log that lacks what the evaluation needs."""
+
+
+def cell_metadata(cell: Cell) -> dict[str, Any]:
+    """The cell as the mapping :func:`~nehmo_core.robots.loader.cell_from_dict` reads."""
+    return {
+        "name": cell.name,
+        "arms": [
+            {
+                "id": a.arm_id,
+                "robot": a.robot.name,
+                "base": {"xyz": list(a.base.xyz), "rpy": list(a.base.rpy)},
+            }
+            for a in cell.arms
+        ],
+    }
+
+
+class EpisodeLogWriter:
+    """Writes the topics of one episode; a context manager (the summary is written on exit)."""
+
+    def __init__(self, path: str | Path, cell: Cell) -> None:
+        self.cell = cell
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._log = LogWriter(self.path)
+
+    def scenario(self, metadata: Mapping[str, Any]) -> None:
+        self._log.write_scenario(
+            {"format": EPISODE_FORMAT, "version": EPISODE_FORMAT_VERSION, **metadata}
+        )
+
+    def _joint_state(self, arm_id: str, t_ns: int, q: np.ndarray, v: np.ndarray) -> JointState:
+        return JointState(
+            header=Header(stamp=stamp(t_ns), frame_id=""),
+            name=list(self.cell.arm(arm_id).robot.joint_names),
+            position=[float(x) for x in q],
+            velocity=[float(x) for x in v],
+        )
+
+    def goals(self, goals: Mapping[str, np.ndarray]) -> None:
+        for arm_id, q in goals.items():
+            msg = self._joint_state(arm_id, 0, q, np.zeros(0))
+            self._log.write(goal_topic(arm_id), msg, 0)
+
+    def tick(
+        self, t_ns: int, q: Mapping[str, np.ndarray], velocity: Mapping[str, np.ndarray]
+    ) -> None:
+        """The clock and every arm's joint state at ``t_ns``."""
+        self._log.write(CLOCK_TOPIC, Clock(clock=stamp(t_ns)), t_ns)
+        for arm_id, qa in q.items():
+            msg = self._joint_state(arm_id, t_ns, qa, velocity[arm_id])
+            self._log.write(joint_states_topic(arm_id), msg, t_ns)
+
+    def plan(self, arm_id: str, t_ns: int, velocity: np.ndarray, status: DiagnosticStatus) -> None:
+        """A command taking effect at ``t_ns`` and the planner status that produced it."""
+        cmd = Float64MultiArray(data=[float(x) for x in velocity])
+        self._log.write(command_topic(arm_id), cmd, t_ns)
+        self._log.write(status_topic(arm_id), status, t_ns)
+
+    def collisions(self, t_ns: int, collisions: list[Collision]) -> None:
+        self._log.write(COLLISIONS_TOPIC, collisions_message(collisions, t_ns), t_ns)
+
+    def close(self) -> None:
+        self._log.close()
+
+    def __enter__(self) -> EpisodeLogWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+@dataclass
+class EpisodeLog:
+    """What an episode log holds, as arrays: ``positions[arm]`` (T, dof) at ``stamps`` (T,) [ns]."""
+
+    path: Path
+    metadata: dict[str, Any]
+    cell: Cell
+    goals: dict[str, np.ndarray]
+    stamps: np.ndarray
+    positions: dict[str, np.ndarray]
+    statuses: dict[str, list[tuple[int, StatusRecord]]] = field(default_factory=dict)
+    commands: dict[str, list[tuple[int, np.ndarray]]] = field(default_factory=dict)
+    collisions: list[tuple[int, list[Collision]]] = field(default_factory=list)
+
+
+def _ordered(msg: JointState, cell: Cell, arm_id: str, where: str) -> np.ndarray:
+    names = list(cell.arm(arm_id).robot.joint_names)
+    if list(msg.name) == names:
+        return np.asarray(msg.position, dtype=np.float64)
+    index = {n: i for i, n in enumerate(msg.name)}
+    missing = [n for n in names if n not in index]
+    if missing:
+        raise EpisodeLogError(f"{where}: joint state of {arm_id!r} lacks joints {missing}")
+    return np.array([msg.position[index[n]] for n in names], dtype=np.float64)
+
+
+def read_episode_log(path: str | Path) -> EpisodeLog:
+    """Read an episode log written by :class:`EpisodeLogWriter` (or a recorder, same topics)."""
+    p = Path(path)
+    metadata = read_scenario(p)
+    if metadata is None or metadata.get("format") != EPISODE_FORMAT:
+        raise EpisodeLogError(f"{p}: no {EPISODE_FORMAT!r} metadata on /nehmo/scenario")
+    if "cell" not in metadata:
+        raise EpisodeLogError(f"{p}: episode metadata lacks the cell")
+    cell = cell_from_dict(metadata["cell"], source=f"{p.name}:cell")
+    goals: dict[str, np.ndarray] = {}
+    by_stamp: dict[int, dict[str, np.ndarray]] = defaultdict(dict)
+    statuses: dict[str, list[tuple[int, StatusRecord]]] = {a: [] for a in cell.arm_ids}
+    commands: dict[str, list[tuple[int, np.ndarray]]] = {a: [] for a in cell.arm_ids}
+    collisions: list[tuple[int, list[Collision]]] = []
+    for rec in iter_log(p):
+        if rec.topic == COLLISIONS_TOPIC and isinstance(rec.message, DiagnosticArray):
+            found = collisions_from_message(rec.message)
+            if found:
+                collisions.append((rec.log_time_ns, found))
+            continue
+        split = split_arm_topic(rec.topic)
+        if split is None or split[0] not in statuses:
+            continue
+        arm_id, what = split
+        msg = rec.message
+        if what == "joint_states" and isinstance(msg, JointState):
+            by_stamp[rec.log_time_ns][arm_id] = _ordered(msg, cell, arm_id, str(p))
+        elif what == "goal" and isinstance(msg, JointState):
+            goals[arm_id] = _ordered(msg, cell, arm_id, str(p))
+        elif what == "planner/status" and isinstance(msg, DiagnosticStatus):
+            statuses[arm_id].append((rec.log_time_ns, telemetry_from_status(msg)))
+        elif what == "velocity_controller/commands" and isinstance(msg, Float64MultiArray):
+            commands[arm_id].append((rec.log_time_ns, np.asarray(msg.data, dtype=np.float64)))
+    missing = [a for a in cell.arm_ids if a not in goals]
+    if missing:
+        raise EpisodeLogError(f"{p}: no goal logged for arms {missing}")
+    complete = sorted(t for t, q in by_stamp.items() if len(q) == len(cell.arms))
+    if not complete:
+        raise EpisodeLogError(f"{p}: no instant with a joint state of every arm")
+    positions = {a: np.array([by_stamp[t][a] for t in complete]) for a in cell.arm_ids}
+    return EpisodeLog(
+        path=p,
+        metadata=metadata,
+        cell=cell,
+        goals=goals,
+        stamps=np.array(complete, dtype=np.int64),
+        positions=positions,
+        statuses=statuses,
+        commands=commands,
+        collisions=collisions,
+    )

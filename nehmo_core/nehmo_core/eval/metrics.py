@@ -1,0 +1,242 @@
+"""Episode outcomes and the paper's metrics, computed from episode logs.
+
+Per episode (:class:`EpisodeResult`): the outcome — ``success`` (every arm within the setup's
+tolerance of its goal, before any collision and within the time limit), ``collision`` (any
+arm-arm or self-collision first) or ``stuck`` (neither by the time limit) — the joint-space
+path length [rad] (sum over arms of ``Σ‖q_{k+1} − q_k‖₂``), and every plan() call's time.
+
+Per row (:func:`aggregate`): SR, CR and stuck [%], planning time [ms] (mean ± std over the
+steps of the timed arms: the arms running an Opt planner among the setup's timed arms, else the
+timed arms; for centralized planners, one sample per episode: the plan), MPL [rad] (mean ± std
+over successful episodes), fail-safe rate and solver statuses.
+
+:func:`evaluate_log` derives an :class:`EpisodeResult` from a log alone;
+:func:`nehmo_core.eval.episode.run_episode` derives the same result in memory.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nehmo_core.eval.episode_log import EpisodeLog, EpisodeLogError, read_episode_log
+from nehmo_core.eval.setups import OPT_KINDS, is_centralized
+from nehmo_core.geometry.pybullet_world import Collision
+from nehmo_core.robots.model import Cell
+from nehmo_core.sim.scenarios import goal_error
+
+__all__ = [
+    "OUTCOMES",
+    "EpisodeResult",
+    "RowMetrics",
+    "aggregate",
+    "evaluate_log",
+    "goal_distance",
+    "path_lengths",
+]
+
+OUTCOMES = ("success", "collision", "stuck")
+
+
+@dataclass(frozen=True)
+class EpisodeResult:
+    """The outcome and measurements of one episode."""
+
+    outcome: str  # one of OUTCOMES
+    end_ns: int  # episode time at the end [ns], from the first logged state of every arm
+    ticks: int  # control ticks simulated
+    path_lengths: dict[str, float]  # [rad] per arm
+    kinds: dict[str, str]  # planner kind per arm
+    timed_arms: tuple[str, ...]
+    plan_times: dict[str, tuple[float, ...]]  # [s] every plan() call, per arm
+    statuses: dict[str, dict[str, int]]  # solver status counts per arm
+    fail_safe: dict[str, int]  # fail-safe commands per arm
+    collisions: tuple[Collision, ...]  # found in the colliding tick
+    final_errors: dict[str, float]  # [rad] goal distance per arm at the end (setup's norm)
+    metadata: dict[str, Any] = field(default_factory=dict, compare=False)  # the logged JSON
+
+    @property
+    def end_time(self) -> float:
+        return self.end_ns / 1e9
+
+    @property
+    def path_length(self) -> float:
+        """Joint-space path length of the cell [rad] (sum over arms)."""
+        return float(sum(self.path_lengths.values()))
+
+    def plan_time_samples(self) -> list[float]:
+        """The planning times [s] this episode contributes to its row's mean ± std."""
+        arms = [a for a in self.timed_arms if self.kinds[a] in OPT_KINDS] or list(self.timed_arms)
+        if is_centralized(self.kinds):
+            return [self.plan_times[arms[0]][0]] if self.plan_times[arms[0]] else []
+        return [t for a in arms for t in self.plan_times[a]]
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["collisions"] = [asdict(c) for c in self.collisions]
+        out["plan_times"] = {a: list(v) for a, v in self.plan_times.items()}
+        out["timed_arms"] = list(self.timed_arms)
+        return out
+
+
+def path_lengths(positions: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """``Σ‖q_{k+1} − q_k‖₂`` [rad] per arm of a trajectory ``positions[arm]`` (T, dof)."""
+    return {
+        a: float(np.linalg.norm(np.diff(np.asarray(q), axis=0), axis=1).sum())
+        for a, q in positions.items()
+    }
+
+
+def goal_distance(q: np.ndarray, goal: np.ndarray, cell: Cell, arm_id: str, norm: str) -> float:
+    """Wrapped joint-space distance [rad] of one arm to its goal: L2 norm or max-abs."""
+    e = goal_error(q, goal, cell.arm(arm_id).robot)
+    return float(np.abs(e).max()) if norm == "max" else float(np.linalg.norm(e))
+
+
+def _first_success(log: EpisodeLog, norm: str, tolerance: float) -> int | None:
+    for k in range(len(log.stamps)):
+        if all(
+            goal_distance(log.positions[a][k], log.goals[a], log.cell, a, norm) < tolerance
+            for a in log.cell.arm_ids
+        ):
+            return k
+    return None
+
+
+def evaluate_log(path_or_log: str | Path | EpisodeLog) -> EpisodeResult:
+    """The :class:`EpisodeResult` of a logged episode, from the log alone."""
+    log = path_or_log if isinstance(path_or_log, EpisodeLog) else read_episode_log(path_or_log)
+    meta = log.metadata
+    try:
+        norm = meta["success"]["norm"]
+        tolerance = float(meta["success"]["tolerance"])
+        limit_ns = int(meta["control"]["max_ticks"]) * int(meta["control"]["period_ns"])
+        period_ns = int(meta["control"]["period_ns"])
+        kinds = {a: str(meta["planners"][a]) for a in log.cell.arm_ids}
+        timed = tuple(meta["timed_arms"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise EpisodeLogError(f"{log.path}: episode metadata lacks {exc}") from None
+    t0 = int(log.stamps[0])  # episode times are counted from the first complete state
+    limit_ns += t0
+    k_success = _first_success(log, norm, tolerance)
+    success_ns = int(log.stamps[k_success]) if k_success is not None else None
+    collision_ns, collisions = log.collisions[0] if log.collisions else (None, [])
+    if (
+        collision_ns is not None
+        and collision_ns <= limit_ns
+        and (success_ns is None or collision_ns <= success_ns)
+    ):
+        outcome, end_ns = "collision", int(collision_ns)
+    elif success_ns is not None and success_ns <= limit_ns:
+        outcome, end_ns, collisions = "success", success_ns, []
+    else:
+        outcome, end_ns, collisions = "stuck", min(limit_ns, int(log.stamps[-1])), []
+    keep = log.stamps <= end_ns
+    positions = {a: q[keep] for a, q in log.positions.items()}
+    last = {a: q[-1] for a, q in positions.items()}
+    plan_times: dict[str, tuple[float, ...]] = {}
+    statuses: dict[str, dict[str, int]] = {}
+    fail_safe: dict[str, int] = {}
+    for a in log.cell.arm_ids:
+        records = [r for _, r in log.statuses[a] if t0 <= r.observation_ns < end_ns]
+        plan_times[a] = tuple(r.telemetry.solve_time for r in records)
+        statuses[a] = dict(Counter(r.telemetry.status for r in records))
+        fail_safe[a] = sum(r.telemetry.fail_safe for r in records)
+    return EpisodeResult(
+        outcome=outcome,
+        end_ns=end_ns - t0,
+        ticks=(end_ns - t0) // period_ns,
+        path_lengths=path_lengths(positions),
+        kinds=kinds,
+        timed_arms=timed,
+        plan_times=plan_times,
+        statuses=statuses,
+        fail_safe=fail_safe,
+        collisions=tuple(collisions),
+        final_errors={
+            a: goal_distance(last[a], log.goals[a], log.cell, a, norm) for a in log.cell.arm_ids
+        },
+        metadata=meta,
+    )
+
+
+@dataclass(frozen=True)
+class RowMetrics:
+    """The paper's metrics over the episodes of one row."""
+
+    episodes: int
+    successes: int
+    collisions: int
+    stuck: int
+    plan_time_ms: tuple[float, float]  # mean, std over plan_time_samples
+    plan_time_samples: int
+    mpl: tuple[float, float]  # [rad] mean, std over successes (nan without successes)
+    fail_safe_rate: float  # fail-safe commands / commands of the timed Opt arms
+    statuses: dict[str, int]
+
+    @property
+    def sr(self) -> float:
+        return 100.0 * self.successes / self.episodes if self.episodes else math.nan
+
+    @property
+    def cr(self) -> float:
+        return 100.0 * self.collisions / self.episodes if self.episodes else math.nan
+
+    @property
+    def stuck_rate(self) -> float:
+        return 100.0 * self.stuck / self.episodes if self.episodes else math.nan
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "episodes": self.episodes,
+            "successes": self.successes,
+            "collisions": self.collisions,
+            "stuck": self.stuck,
+            "sr": self.sr,
+            "cr": self.cr,
+            "stuck_rate": self.stuck_rate,
+            "plan_time_ms": {"mean": self.plan_time_ms[0], "std": self.plan_time_ms[1]},
+            "plan_time_samples": self.plan_time_samples,
+            "mpl": {"mean": self.mpl[0], "std": self.mpl[1]},
+            "fail_safe_rate": self.fail_safe_rate,
+            "statuses": self.statuses,
+        }
+
+
+def _mean_std(x: Sequence[float]) -> tuple[float, float]:
+    if not x:
+        return math.nan, math.nan
+    a = np.asarray(x, dtype=np.float64)
+    return float(a.mean()), float(a.std())
+
+
+def aggregate(results: Sequence[EpisodeResult]) -> RowMetrics:
+    """SR, CR, stuck, planning time, MPL and fail-safe rate over ``results``."""
+    counts = Counter(r.outcome for r in results)
+    times = [t * 1e3 for r in results for t in r.plan_time_samples()]
+    mpl = [r.path_length for r in results if r.outcome == "success"]
+    statuses: Counter[str] = Counter()
+    fail, calls = 0, 0
+    for r in results:
+        arms = [a for a in r.timed_arms if r.kinds[a] in OPT_KINDS]
+        for a in arms:
+            statuses.update(r.statuses[a])
+            fail += r.fail_safe[a]
+            calls += len(r.plan_times[a])
+    return RowMetrics(
+        episodes=len(results),
+        successes=counts["success"],
+        collisions=counts["collision"],
+        stuck=counts["stuck"],
+        plan_time_ms=_mean_std(times),
+        plan_time_samples=len(times),
+        mpl=_mean_std(mpl),
+        fail_safe_rate=fail / calls if calls else math.nan,
+        statuses=dict(statuses),
+    )

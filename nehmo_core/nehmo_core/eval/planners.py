@@ -1,0 +1,319 @@
+"""Planners of an evaluation row: value models for the Opt kinds, trackers for centralized ones.
+
+Value models come from *sources*, given on the command line as ``[KIND=]SOURCE``:
+
+* ``SOURCE`` is a shipped pair name (``ur5_ur5``, ``ur5_kinova``: the variant is the row's,
+  per :data:`~nehmo_core.eval.setups.OPT_KINDS`), a training run directory (its model, or its
+  latest checkpoint) or a ``.safetensors`` file, or ``synthetic``: random-weight stand-ins from
+  :mod:`nehmo_core.planning.synthetic` (for smoke runs only; their numbers mean nothing).
+* ``KIND=`` limits a source to one planner kind (``nehmo_no_sym=runs/ur5_ur5_bc``); a source
+  without it serves every Opt kind whose variant it matches.
+* Without a source for a kind, the shipped models of the cell's robot pairs are used.
+
+A row fails to build, naming the missing pair, when an Opt planner has a peer in reach that no
+model covers: such a peer would not be constrained at all.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import shutil
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError
+from nehmo_core.eval.setups import OPT_KINDS, is_centralized
+from nehmo_core.planning.factory import centralized_trackers, make_planner
+from nehmo_core.planning.interface import Planner
+from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.robots.model import Cell, Pose
+from nehmo_core.sim.scenarios import Scenario
+
+__all__ = [
+    "SYNTHETIC",
+    "ModelRegistry",
+    "ValueModelSource",
+    "build_planners",
+    "parse_value_models",
+    "snapshot_value_models",
+    "swapped_pair_model",
+    "unmodelled_peers",
+]
+
+SYNTHETIC = "synthetic"
+_SHIPPED_PAIRS = {("ur5", "ur5"): "ur5_ur5", ("ur5", "kinova_gen3_6dof"): "ur5_kinova"}
+
+
+@dataclass(frozen=True)
+class ValueModelSource:
+    """Where pair value models come from, for one Opt kind (``kind``) or every one (None)."""
+
+    source: str
+    kind: str | None = None
+
+    def __str__(self) -> str:
+        return self.source if self.kind is None else f"{self.kind}={self.source}"
+
+
+def parse_value_models(items: Sequence[str]) -> tuple[ValueModelSource, ...]:
+    """Parse ``[KIND=]SOURCE`` strings (see the module docstring)."""
+    out = []
+    for item in items:
+        head, sep, tail = item.partition("=")
+        if sep and head in OPT_KINDS:
+            out.append(ValueModelSource(tail, head))
+        elif sep and "/" not in head and "." not in head:
+            raise InvalidValueError(
+                "value model", f"must be [KIND=]SOURCE with KIND in {sorted(OPT_KINDS)}", item
+            )
+        else:
+            out.append(ValueModelSource(item))
+        if not out[-1].source:
+            raise InvalidValueError("value model", "must name a source after '='", item)
+    return tuple(out)
+
+
+def _weights_file(source: Path) -> Path:
+    """The weights a path source loads (as :func:`~nehmo_core.hjr.train.load_value_function`)."""
+    if source.is_dir():
+        model = source / "model.safetensors"
+        return model if model.exists() else source / "checkpoint.safetensors"
+    return source
+
+
+def snapshot_value_models(
+    sources: Sequence[ValueModelSource], directory: str | Path
+) -> tuple[ValueModelSource, ...]:
+    """Copy every path source's weights (and JSON sidecar) under ``directory``.
+
+    A training run rewrites its checkpoint in place; evaluating a snapshot makes every worker
+    (and every later re-run) use the same weights. Shipped names and ``synthetic`` pass through.
+    """
+    from nehmo_core.hjr.train import SHIPPED_VALUE_FUNCTIONS
+
+    out = []
+    for s in sources:
+        if s.source == SYNTHETIC or s.source in SHIPPED_VALUE_FUNCTIONS:
+            out.append(s)
+            continue
+        src = _weights_file(Path(s.source))
+        if not src.is_file():
+            raise ModelFileError(f"value model {s.source!r}: no weights file {src}")
+        digest = hashlib.sha256(src.read_bytes()).hexdigest()[:12]
+        dest = Path(directory) / f"{Path(s.source).name}_{digest}" / src.name
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        sidecar = src.with_suffix(".json")
+        if sidecar.exists():
+            shutil.copy2(sidecar, dest.with_suffix(".json"))
+        shutil.copy2(src, dest)
+        out.append(ValueModelSource(str(dest), s.kind))
+    return tuple(out)
+
+
+def robot_pairs(cell: Cell) -> list[tuple[str, str]]:
+    """Ordered (own robot, peer robot) pairs of the cell's arms, without repeats."""
+    pairs = []
+    for own in cell.arms:
+        for peer in cell.arms:
+            key = (own.robot.name, peer.robot.name)
+            if own.arm_id != peer.arm_id and key not in pairs:
+                pairs.append(key)
+    return pairs
+
+
+def _inverse_yaw_pose(pose: Pose) -> Pose:
+    T = np.linalg.inv(pose.matrix())
+    if abs(T[2, 2] - 1.0) > 1e-9:
+        raise NehmoError(f"cannot swap a pair model whose base is not a pure yaw: {pose}")
+    yaw = math.atan2(T[1, 0], T[0, 0])
+    return Pose((float(T[0, 3]), float(T[1, 3]), float(T[2, 3])), (0.0, 0.0, yaw))
+
+
+def swapped_pair_model(model: PairValueModel, name: str) -> PairValueModel:
+    """``model`` seen from its second robot: ``V'(τ, q², q¹) = V(τ, q¹, q²)``.
+
+    The roles of the players are swapped too (the controlled arm becomes the disturbance), so
+    this is NOT the value function of the swapped game. It serves synthetic stand-ins, whose
+    ``V`` is the symmetric distance plus a small residual.
+    """
+    n1, n2 = model.n1, model.n2
+    tau = ca.MX.sym("tau")
+    x = ca.MX.sym("x", n1 + n2)
+    original = ca.vertcat(x[n2:], x[:n2])
+    v = model.value(tau, original)
+    v2, g = model.value_grad(tau, original)
+    grad = ca.vertcat(g[n1:], g[:n1])
+    return PairValueModel(
+        name=name,
+        robot1=model.robot2,
+        robot2=model.robot1,
+        base2=_inverse_yaw_pose(model.base2),
+        n1=n2,
+        n2=n1,
+        horizon=model.horizon,
+        value=ca.Function(name, [tau, x], [v], ["tau", "x"], ["v"]),
+        value_grad=ca.Function(f"{name}_grad", [tau, x], [v2, grad], ["tau", "x"], ["v", "grad"]),
+        backend=model.backend,
+    )
+
+
+class ModelRegistry:
+    """Builds and caches the pair value models of each Opt kind (one registry per process)."""
+
+    def __init__(self, sources: Sequence[ValueModelSource] = (), backend: str = "auto") -> None:
+        for s in sources:
+            if s.kind is not None and s.kind not in OPT_KINDS:
+                raise InvalidValueError("kind", f"must be one of {sorted(OPT_KINDS)}", s.kind)
+        self.sources = tuple(sources)
+        self.backend = backend
+        self._cache: dict[tuple[str, str, tuple[tuple[str, str], ...]], list[PairValueModel]] = {}
+        self.described: dict[str, list[dict[str, Any]]] = {}
+
+    def sources_for(self, kind: str, cell: Cell) -> list[str]:
+        """The sources serving ``kind`` on ``cell`` (explicit ones first, else the shipped)."""
+        scoped = [s.source for s in self.sources if s.kind == kind]
+        if scoped:
+            return scoped
+        general = [s.source for s in self.sources if s.kind is None]
+        if general:
+            return general
+        return [_SHIPPED_PAIRS[p] for p in robot_pairs(cell) if p in _SHIPPED_PAIRS]
+
+    def models_for(self, kind: str, cell: Cell) -> list[PairValueModel]:
+        """Every pair model the ``kind`` planners of ``cell`` use."""
+        if kind not in OPT_KINDS:
+            raise InvalidValueError("kind", f"must be one of {sorted(OPT_KINDS)}", kind)
+        out: list[PairValueModel] = []
+        pairs = tuple(robot_pairs(cell))
+        for source in self.sources_for(kind, cell):
+            key = (kind, source, pairs)
+            if key not in self._cache:
+                self._cache[key] = self._load(kind, source, pairs)
+            out.extend(self._cache[key])
+        self.described[kind] = [
+            {"name": m.name, "robots": [m.robot1, m.robot2], "backend": m.backend} for m in out
+        ]
+        return out
+
+    def _load(
+        self, kind: str, source: str, pairs: tuple[tuple[str, str], ...]
+    ) -> list[PairValueModel]:
+        import nehmo_core.hjr.arm_pairs  # noqa: F401  (registers the arm-pair systems)
+        from nehmo_core.hjr.train import SHIPPED_VALUE_FUNCTIONS, load_value_function
+
+        variant = OPT_KINDS[kind]
+        slug = variant.replace("+", "_")
+        if source == SYNTHETIC:
+            return self._synthetic(variant, pairs)
+        if source in SHIPPED_VALUE_FUNCTIONS:
+            try:
+                vf = load_value_function(source, variant=variant)
+            except (ModelFileError, NehmoError, FileNotFoundError) as exc:
+                raise ModelFileError(
+                    f"row {kind!r} needs the shipped {variant} value function of {source!r}, "
+                    f"which is not available ({exc}); pass --value-model {kind}=PATH "
+                    f"(a run directory) or --value-model synthetic for a smoke run"
+                ) from None
+        else:
+            vf = load_value_function(Path(source))
+            if vf.variant != variant:
+                raise InvalidValueError(
+                    "value model",
+                    f"for row {kind!r} must be a {variant} model ({Path(source).name} is "
+                    f"{vf.variant}); scope it with {_kind_for(vf.variant)}=PATH",
+                    source,
+                )
+        name = f"{kind}_{Path(source).name}_{slug}".replace(".", "_").replace("-", "_")
+        return [PairValueModel.from_value_function(vf, name, backend=self.backend)]
+
+    def _synthetic(self, variant: str, pairs: tuple[tuple[str, str], ...]) -> list[PairValueModel]:
+        from nehmo_core.planning.synthetic import random_value_function
+
+        slug = variant.replace("+", "_")
+        made: dict[tuple[str, str], PairValueModel] = {}
+        for pair in pairs:
+            forward = _SHIPPED_PAIRS.get(pair)
+            backward = _SHIPPED_PAIRS.get((pair[1], pair[0]))
+            if forward is not None:
+                vf = random_value_function(forward, variant)
+                made[pair] = PairValueModel.from_value_function(
+                    vf, f"synthetic_{forward}_{slug}", backend=self.backend
+                )
+            elif backward is not None:
+                if (pair[1], pair[0]) not in made:
+                    vf = random_value_function(backward, variant)
+                    made[(pair[1], pair[0])] = PairValueModel.from_value_function(
+                        vf, f"synthetic_{backward}_{slug}", backend=self.backend
+                    )
+                made[pair] = swapped_pair_model(
+                    made[(pair[1], pair[0])], f"synthetic_{backward}_{slug}_swapped"
+                )
+        return [made[p] for p in pairs if p in made]
+
+
+def unmodelled_peers(planners: Mapping[str, Planner]) -> dict[str, list[str]]:
+    """Peers in reach that each Opt planner does not constrain (no pair model fits)."""
+    return {
+        a: list(p.peers_unmodelled)
+        for a, p in planners.items()
+        if isinstance(p, NehmoPlanner) and p.peers_unmodelled
+    }
+
+
+def _kind_for(variant: str) -> str:
+    return next((k for k, v in OPT_KINDS.items() if v == variant), "KIND")
+
+
+def build_planners(
+    cell: Cell,
+    kinds: Mapping[str, str],
+    scenario: Scenario,
+    period: float,
+    registry: ModelRegistry,
+    settings: PlannerSettings | None = None,
+    cache: dict[str, Planner] | None = None,
+    allow_unmodelled: bool = False,
+) -> dict[str, Planner]:
+    """One planner per arm for a row (``kinds``); centralized rows plan ``scenario`` now.
+
+    ``cache`` (arm id → planner) reuses decentralized planners across episodes of a row. An Opt
+    planner with a peer in reach that no model covers raises, unless ``allow_unmodelled``
+    (see :func:`unmodelled_peers` to report them).
+    """
+    if is_centralized(kinds):
+        kind = next(iter(kinds.values()))
+        trackers, _ = centralized_trackers(
+            kind, cell, scenario.start, scenario.goal, period, settings
+        )
+        return trackers
+    if cache is not None and set(cache) == set(cell.arm_ids):
+        return dict(cache)
+    out: dict[str, Planner] = {}
+    for arm_id, kind in kinds.items():
+        models = registry.models_for(kind, cell) if kind in OPT_KINDS else ()
+        planner = make_planner(kind, cell, arm_id, models, settings)
+        if isinstance(planner, NehmoPlanner) and planner.peers_unmodelled and not allow_unmodelled:
+            need = sorted(
+                {
+                    (cell.arm(arm_id).robot.name, cell.arm(p).robot.name)
+                    for p in planner.peers_unmodelled
+                }
+            )
+            raise NehmoError(
+                f"arm {arm_id!r} ({kind}) has peers {list(planner.peers_unmodelled)} in reach "
+                f"that no value model covers; it needs pair models {need} (robot1 = the "
+                f"planning arm). Sources used: {registry.sources_for(kind, cell)}"
+            )
+        out[arm_id] = planner
+    if cache is not None:
+        cache.clear()
+        cache.update(out)
+    return out

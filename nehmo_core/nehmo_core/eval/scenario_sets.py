@@ -1,0 +1,79 @@
+"""Scenario sets of the evaluation setups, generated once per seed and kept as JSON files.
+
+Scenario ``i`` of the set with seed ``s`` is drawn from ``default_rng([s, i])`` by the paper's
+protocol (:func:`nehmo_core.sim.scenarios.sample_scenario`). The UR5-Kinova challenging set keeps
+the first candidates in which the naive planner collides, run by the same episode runner and
+rules as the evaluation (so its Naive / Naive row collides in every episode by construction).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from nehmo_core.errors import UnknownNameError
+from nehmo_core.eval.episode import EpisodeSettings, run_episode
+from nehmo_core.eval.setups import SCENARIO_FILTERS, Setup
+from nehmo_core.planning.baselines import NaivePlanner
+from nehmo_core.robots.model import Cell
+from nehmo_core.sim.cell_sim import CellSimulator
+from nehmo_core.sim.scenarios import (
+    Scenario,
+    ScenarioSet,
+    generate_scenario_set,
+    load_scenario_set,
+    save_scenario_set,
+)
+
+__all__ = ["naive_collides", "scenario_set_for", "scenario_set_path"]
+
+
+def naive_collides(
+    cell: Cell, settings: EpisodeSettings, sim: CellSimulator
+) -> Callable[[Scenario], bool]:
+    """A filter: true when the naive planner on every arm collides within the time limit."""
+    planners = {a: NaivePlanner(cell, a) for a in cell.arm_ids}
+
+    def accept(scenario: Scenario) -> bool:
+        result = run_episode(cell, scenario, planners, settings, simulator=sim)
+        return result.outcome == "collision"
+
+    return accept
+
+
+def scenario_set_path(directory: str | Path, setup: Setup, seed: int) -> Path:
+    return Path(directory) / f"{setup.name}_seed{seed}.json"
+
+
+def scenario_set_for(
+    setup: Setup,
+    seed: int,
+    count: int,
+    directory: str | Path | None = None,
+    max_candidates: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> ScenarioSet:
+    """The first ``count`` scenarios of ``setup``'s set with ``seed``.
+
+    With ``directory``, a saved set with at least ``count`` scenarios is reused (a shorter one
+    is regenerated) and a new set is saved there.
+    """
+    path = scenario_set_path(directory, setup, seed) if directory is not None else None
+    if path is not None and path.exists():
+        saved = load_scenario_set(path)
+        if saved.meta.get("setup") == setup.name and len(saved) >= count:
+            return saved.head(count)
+    cell = setup.load_cell()
+    settings = EpisodeSettings.for_setup(setup)
+    meta = {"setup": setup.name, "filter": setup.scenario_filter}
+    if setup.scenario_filter is None:
+        made = generate_scenario_set(cell, seed, count, None, max_candidates, meta, progress)
+    elif setup.scenario_filter == "naive_collides":
+        with CellSimulator(cell, settings.substeps, settings.self_collision) as sim:
+            accept = naive_collides(cell, settings, sim)
+            made = generate_scenario_set(cell, seed, count, accept, max_candidates, meta, progress)
+    else:
+        raise UnknownNameError("scenario filter", setup.scenario_filter, SCENARIO_FILTERS)
+    if path is not None:
+        save_scenario_set(made, path)
+    return made

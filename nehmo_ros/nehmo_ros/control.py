@@ -1,0 +1,433 @@
+"""One arm's control loop without a middleware: state buffer, solve worker, fail-safe rules.
+
+The ``arm_planner`` node is a thin shell around :class:`ArmController`; everything here is
+tested without ROS. Timing (DESIGN.md § 3): at tick ``k`` the controller publishes the command
+solved from the observations of tick ``k − 1`` and hands the observations of tick ``k`` to a
+worker thread, so a solve has one whole period while the current command executes.
+
+Rules, in order of precedence, for the command of a tick:
+
+1. no fresh own state, or no goal yet → hold still (zero velocity);
+2. the solve of the previous tick has not finished (missed deadline) → the fail-safe computed
+   from the previous observations before that solve started (hold still once that fail-safe is
+   older than ``peer_timeout``: a hung solver does not steer the arm on old information);
+3. a peer in the cell has never been heard from → hold still;
+4. a peer's state is stale (older than ``peer_timeout``) → ``stale_policy``: the fail-safe
+   against its last known state (``fail_safe``) or hold still (``hold``);
+5. the solver failed, was infeasible or late inside ``plan`` → the planner's fail-safe;
+6. otherwise the planner's command.
+
+Joint states that are NaN/inf, of the wrong length or with unknown joint names are rejected
+(counted and reported) and leave the previous state in place, so a peer sending only garbage
+turns stale. Times here are monotonic seconds given by the caller.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from nehmo_core.errors import InvalidValueError, UnknownNameError
+from nehmo_core.planning.interface import Planner, Telemetry
+from nehmo_core.robots.model import Cell, RobotModel
+
+__all__ = [
+    "STALE_POLICIES",
+    "ArmController",
+    "ControlSettings",
+    "Decision",
+    "Observation",
+    "StateBuffer",
+]
+
+STALE_POLICIES = ("fail_safe", "hold")
+#: Statuses of a controller that cannot plan yet (nothing to command).
+WAITING = ("starting", "no_own_state", "no_goal", "waiting_for_peers")
+
+
+@dataclass(frozen=True)
+class ControlSettings:
+    """Rate [Hz], solve budget [s], staleness timeout [s] and what a stale peer triggers."""
+
+    rate: float = 25.0
+    deadline: float = 0.03  # budget of one solve inside a period (given to the planner too)
+    peer_timeout: float = 0.25  # a joint state older than this is stale
+    stale_policy: str = "fail_safe"
+    u_max: float = 0.5  # [rad/s] every command is clipped to ±u_max
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.rate) and 0 < self.rate <= 1000):
+            raise InvalidValueError("rate", "must lie in (0, 1000] Hz", self.rate)
+        if not 0 < self.deadline < 1.0 / self.rate:
+            raise InvalidValueError(
+                "deadline", f"must lie in (0, 1/rate = {1.0 / self.rate:.4g}) s", self.deadline
+            )
+        if not self.peer_timeout > 0:
+            raise InvalidValueError("peer_timeout", "must be > 0 [s]", self.peer_timeout)
+        if self.stale_policy not in STALE_POLICIES:
+            raise UnknownNameError("stale_policy", self.stale_policy, STALE_POLICIES)
+        if not self.u_max > 0:
+            raise InvalidValueError("u_max", "must be > 0 [rad/s]", self.u_max)
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.rate
+
+
+# ------------------------------------------------------------------------------- state buffer
+@dataclass
+class _Latest:
+    q: np.ndarray
+    received: float  # [s] monotonic
+
+
+class StateBuffer:
+    """Latest valid joint state [rad] of every arm of a cell, with its receive time."""
+
+    def __init__(self, cell: Cell) -> None:
+        self.cell = cell
+        self._lock = threading.Lock()
+        self._latest: dict[str, _Latest] = {}
+        self.rejected: dict[str, int] = {a: 0 for a in cell.arm_ids}
+        self.last_rejection: dict[str, str] = {}
+
+    def update(
+        self, arm_id: str, names: Sequence[str], position: Sequence[float], now: float
+    ) -> str | None:
+        """Store a joint state; returns why it was rejected, or None when accepted."""
+        robot = self.cell.arm(arm_id).robot
+        reason = None
+        try:
+            q = order_joints(robot, names, position, f"/{arm_id}/joint_states")
+        except InvalidValueError as err:
+            reason = str(err)
+        with self._lock:
+            if reason is not None:
+                self.rejected[arm_id] += 1
+                self.last_rejection[arm_id] = reason
+                return reason
+            self._latest[arm_id] = _Latest(q, now)
+        return None
+
+    def get(self, arm_id: str) -> tuple[np.ndarray, float] | None:
+        """``(q, receive time)`` of ``arm_id``'s latest valid state, or None."""
+        with self._lock:
+            latest = self._latest.get(arm_id)
+        return None if latest is None else (latest.q, latest.received)
+
+
+def order_joints(
+    robot: RobotModel, names: Sequence[str], position: Sequence[float], parameter: str
+) -> np.ndarray:
+    """Positions in the robot's joint order: by ``names`` when given, else as they come."""
+    values = np.asarray(list(position), dtype=np.float64)
+    if names:
+        names = list(names)
+        if sorted(names) != sorted(robot.joint_names) or len(values) != len(names):
+            raise InvalidValueError(
+                parameter,
+                f"must name the joints of robot '{robot.name}' {list(robot.joint_names)} "
+                "once each, with one position per name",
+                {"name": names, "position": values.tolist()},
+            )
+        values = values[[names.index(j) for j in robot.joint_names]]
+    return robot.check_q(values, parameter)
+
+
+# ----------------------------------------------------------------------------- observations
+@dataclass(frozen=True)
+class Observation:
+    """What one tick saw: own and peer states [rad], their ages [s], the goal [rad]."""
+
+    tick: int
+    stamp_ns: int  # ROS time [ns] of the tick (simulated time under use_sim_time)
+    q_self: np.ndarray | None  # None: own state missing or stale
+    peers: Mapping[str, np.ndarray]  # last known state of every peer heard from
+    ages: Mapping[str, float]  # [s] age of every arm's state (inf: never received)
+    stale: tuple[str, ...]  # peers whose last state is older than peer_timeout
+    missing: tuple[str, ...]  # peers never heard from
+    goal: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A command (dof,) [rad/s] and why it was chosen."""
+
+    velocity: np.ndarray
+    status: str
+    fail_safe: bool = False
+    hold: bool = False
+    tick: int = -1  # the observation tick it was computed from
+    observation_ns: int = 0  # ROS time [ns] of that observation
+    solve_time: float = 0.0  # [s] plan() time when the planner ran, else the worker's job time
+    telemetry: Telemetry | None = None  # the planner's own report, when it ran
+    stale: tuple[str, ...] = ()
+    missing: tuple[str, ...] = ()
+    error: str = ""
+
+    @property
+    def planned(self) -> bool:
+        """True when the planner itself produced this command (plan() ran on time)."""
+        return self.telemetry is not None
+
+    @property
+    def ready(self) -> bool:
+        """False while the arm waits for its own state, its goal or a first peer state."""
+        return self.status not in WAITING
+
+
+def _zeros(dof: int) -> np.ndarray:
+    return np.zeros(dof)
+
+
+# ----------------------------------------------------------------------------- the worker
+class SolveWorker:
+    """A background thread that runs one job at a time; the tick thread never waits on it."""
+
+    def __init__(self, solve: Callable[[Observation], Decision], name: str = "solve") -> None:
+        self._solve = solve
+        self._cond = threading.Condition()
+        self._job: Observation | None = None
+        self._result: Decision | None = None
+        self._busy = False
+        self._stopped = False
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+        self._thread.start()
+
+    def submit(self, obs: Observation) -> bool:
+        """Start solving ``obs``; False (nothing started) while the previous job still runs."""
+        with self._cond:
+            if self._busy or self._stopped:
+                return False
+            self._job, self._result, self._busy = obs, None, True
+            self._cond.notify_all()
+            return True
+
+    def take(self) -> Decision | None:
+        """The finished result, once (None while running or when nothing was submitted)."""
+        with self._cond:
+            result, self._result = self._result, None
+            return result
+
+    @property
+    def busy(self) -> bool:
+        with self._cond:
+            return self._busy
+
+    def stop(self, timeout: float = 1.0) -> None:
+        """Stop the thread (a job in flight is allowed to finish within ``timeout``)."""
+        with self._cond:
+            self._stopped = True
+            self._cond.notify_all()
+        self._thread.join(timeout)
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while self._job is None and not self._stopped:
+                    self._cond.wait()
+                if self._stopped:
+                    return
+                job, self._job = self._job, None
+            assert job is not None
+            result = self._solve(job)
+            with self._cond:
+                self._result, self._busy = result, False
+
+
+# ----------------------------------------------------------------------------- the controller
+@dataclass
+class Counters:
+    """Running totals reported with every status message."""
+
+    ticks: int = 0
+    deadline_misses: int = 0
+    fail_safes: int = 0
+    holds: int = 0
+    solver_errors: int = 0
+
+
+class ArmController:
+    """Per-tick command of one arm: the planner runs in a worker, the rules above around it."""
+
+    def __init__(
+        self,
+        cell: Cell,
+        arm_id: str,
+        planner: Planner,
+        settings: ControlSettings | None = None,
+    ) -> None:
+        self.cell = cell
+        self.arm_id = arm_id
+        self.robot = cell.arm(arm_id).robot
+        self.planner = planner
+        self.settings = settings or ControlSettings()
+        self.peer_ids = tuple(a for a in cell.arm_ids if a != arm_id)
+        self.states = StateBuffer(cell)
+        self.counters = Counters()
+        self._goal: np.ndarray | None = None
+        self._goal_lock = threading.Lock()
+        self._tick = 0
+        self.last_observation: Observation | None = None
+        self._submitted: tuple[int, int, float] | None = None  # tick, stamp, monotonic time
+        self._fallback_lock = threading.Lock()
+        self._fallback: tuple[int, np.ndarray] | None = None  # (tick, fail-safe) of the latest job
+        self._worker = SolveWorker(self._solve, name=f"solve_{arm_id}")
+
+    def telemetry(self, decision: Decision) -> Telemetry:
+        """The planner-status telemetry of ``decision`` (the planner's own when it ran)."""
+        if decision.telemetry is not None:
+            return replace(decision.telemetry, status=decision.status)
+        return Telemetry(decision.solve_time, decision.status, fail_safe=decision.fail_safe)
+
+    # -- inputs (any thread) ----------------------------------------------------------------
+    def set_goal(self, names: Sequence[str], position: Sequence[float]) -> np.ndarray:
+        """Validate and store the goal [rad] (joint names, finiteness, joint limits)."""
+        q = order_joints(self.robot, names, position, f"/{self.arm_id}/goal")
+        q = self.robot.check_within_limits(q, f"/{self.arm_id}/goal")
+        with self._goal_lock:
+            self._goal = q
+        return q
+
+    @property
+    def goal(self) -> np.ndarray | None:
+        with self._goal_lock:
+            return self._goal
+
+    def observe(self, now: float, stamp_ns: int = 0) -> Observation:
+        """Snapshot of the buffers at ``now`` [s] (monotonic) for the current tick."""
+        s = self.settings
+        ages: dict[str, float] = {}
+        peers: dict[str, np.ndarray] = {}
+        stale, missing = [], []
+        q_self = None
+        for arm_id in self.cell.arm_ids:
+            got = self.states.get(arm_id)
+            ages[arm_id] = math.inf if got is None else now - got[1]
+            if arm_id == self.arm_id:
+                if got is not None and ages[arm_id] <= s.peer_timeout:
+                    q_self = got[0]
+                continue
+            if got is None:
+                missing.append(arm_id)
+                continue
+            peers[arm_id] = got[0]
+            if ages[arm_id] > s.peer_timeout:
+                stale.append(arm_id)
+        return Observation(
+            self._tick, stamp_ns, q_self, peers, ages, tuple(stale), tuple(missing), self.goal
+        )
+
+    # -- the tick (timer thread) ------------------------------------------------------------
+    def tick(self, now: float, stamp_ns: int = 0) -> Decision:
+        """The command to publish now; starts the solve of this tick's observations.
+
+        ``now`` [s] is monotonic time (staleness), ``stamp_ns`` the ROS time of the tick.
+        """
+        decision = self._collect(now, stamp_ns)
+        self._count(decision)
+        obs = self.last_observation = self.observe(now, stamp_ns)
+        if self._worker.submit(obs):
+            self._submitted = (obs.tick, obs.stamp_ns, now)
+        self._tick += 1
+        return decision
+
+    def _collect(self, now: float, stamp_ns: int) -> Decision:
+        dof = self.robot.dof
+        result = self._worker.take()  # a late result of an abandoned job is dropped here
+        expected, self._submitted = self._submitted, None
+        if expected is not None and result is not None and result.tick == expected[0]:
+            return result
+        if expected is None and self._tick == 0:
+            return Decision(_zeros(dof), "starting", hold=True)
+        # The solve due now has not finished (or none could start: the worker was still busy).
+        self.counters.deadline_misses += 1
+        late = Decision(
+            _zeros(dof),
+            "deadline_missed",
+            fail_safe=True,
+            hold=True,
+            tick=expected[0] if expected else self._tick,
+            observation_ns=expected[1] if expected else stamp_ns,
+            solve_time=now - expected[2] if expected else 0.0,
+        )
+        with self._fallback_lock:
+            fallback = self._fallback
+        max_age = self.settings.peer_timeout / self.settings.period  # [ticks]
+        if fallback is not None and self._tick - fallback[0] <= max_age:
+            return replace(late, velocity=fallback[1], hold=False)
+        return late
+
+    def _count(self, decision: Decision) -> None:
+        c = self.counters
+        c.ticks += 1
+        c.fail_safes += int(decision.fail_safe)
+        c.holds += int(decision.hold)
+        c.solver_errors += int(bool(decision.error))
+
+    def stop(self) -> None:
+        """Stop the worker thread."""
+        self._worker.stop()
+
+    # -- the solve (worker thread) ----------------------------------------------------------
+    def _solve(self, obs: Observation) -> Decision:
+        import time
+
+        start = time.perf_counter()
+        try:
+            decision = self._decide(obs)
+        except Exception as exc:  # a planner crash must never reach the tick thread
+            decision = self._failure(obs, exc)
+        velocity = np.clip(decision.velocity, -self.settings.u_max, self.settings.u_max)
+        if not np.all(np.isfinite(velocity)):
+            velocity = _zeros(self.robot.dof)
+            decision = replace(decision, status="non_finite_command", hold=True, fail_safe=True)
+        job_time = time.perf_counter() - start
+        return replace(
+            decision,
+            velocity=velocity,
+            tick=obs.tick,
+            observation_ns=obs.stamp_ns,
+            solve_time=decision.telemetry.solve_time if decision.telemetry else job_time,
+            stale=obs.stale,
+            missing=obs.missing,
+        )
+
+    def _hold(self, status: str) -> Decision:
+        return Decision(_zeros(self.robot.dof), status, hold=True)
+
+    def _fail_safe_velocity(self, q: np.ndarray, peers: Mapping[str, np.ndarray]) -> np.ndarray:
+        fail_safe = getattr(self.planner, "fail_safe", None)
+        if fail_safe is None:  # planners without a value function: holding still is their safe act
+            return _zeros(self.robot.dof)
+        return np.asarray(fail_safe(q, peers), dtype=np.float64)
+
+    def _decide(self, obs: Observation) -> Decision:
+        if obs.q_self is None:
+            return self._hold("no_own_state")
+        if obs.goal is None:
+            return self._hold("no_goal")
+        if obs.missing:
+            return self._hold("waiting_for_peers")
+        fallback = self._fail_safe_velocity(obs.q_self, obs.peers)
+        with self._fallback_lock:
+            self._fallback = (obs.tick, fallback)
+        if obs.stale:
+            if self.settings.stale_policy == "hold":
+                return self._hold("stale_peer")
+            return Decision(fallback, "stale_peer", fail_safe=True)
+        result = self.planner.plan(obs.q_self, obs.peers, obs.goal)
+        t = result.telemetry
+        return Decision(result.velocity, t.status, fail_safe=t.fail_safe, telemetry=t)
+
+    def _failure(self, obs: Observation, exc: Exception) -> Decision:
+        error = f"{type(exc).__name__}: {exc}"
+        with self._fallback_lock:
+            fallback = self._fallback
+        if fallback is not None and fallback[0] == obs.tick:
+            return Decision(fallback[1], "failed", fail_safe=True, error=error)
+        return Decision(_zeros(self.robot.dof), "failed", fail_safe=True, hold=True, error=error)

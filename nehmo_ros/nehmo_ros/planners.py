@@ -1,0 +1,96 @@
+"""Build one arm's planner from node parameters, with the evaluation's model registry.
+
+The node's ``model`` parameter is the evaluation's value-model source list
+(:mod:`nehmo_core.eval.planners`), so a ROS run and a batch run of the same row use the very
+same pair models:
+
+``shipped``    the shipped value functions of the cell's robot pairs (variant per planner kind:
+               nehmo → bc+sym, nehmo_no_sym → bc, opt_deepreach → deepreach);
+``synthetic``  random-weight stand-ins on the pair's learned distance, for plumbing tests and
+               demos until trained models ship (V is the distance plus a small residual, not a
+               reachability value);
+otherwise      ``[KIND=]SOURCE`` items, comma-separated: a training run directory or a
+               ``.safetensors`` file.
+
+Naive and reckless planners take no model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
+from nehmo_core.eval.planners import ModelRegistry, parse_value_models
+from nehmo_core.eval.setups import OPT_KINDS
+from nehmo_core.planning.factory import DECENTRALIZED, make_planner
+from nehmo_core.planning.interface import Planner
+from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.robots.model import Cell
+
+__all__ = ["SHIPPED", "build_planner", "model_registry", "warm_up"]
+
+SHIPPED = "shipped"
+
+
+def model_registry(model: str) -> ModelRegistry:
+    """The registry for the ``model`` parameter (``shipped``, ``synthetic`` or sources)."""
+    text = model.strip()
+    if text in ("", SHIPPED):
+        return ModelRegistry()
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if not items:
+        raise InvalidValueError(
+            "model", "must be 'shipped', 'synthetic' or [KIND=]PATH items", model
+        )
+    return ModelRegistry(parse_value_models(items))
+
+
+def build_planner(
+    kind: str,
+    cell: Cell,
+    arm_id: str,
+    model: str,
+    settings: PlannerSettings,
+    allow_unmodelled: bool = False,
+) -> Planner:
+    """A planner of ``kind`` for ``arm_id``; raises naming the parameter on bad input.
+
+    Peers in reach that no pair model covers are an error unless ``allow_unmodelled`` (they
+    are then not constrained, and the node reports them).
+    """
+    if kind not in DECENTRALIZED:
+        raise UnknownNameError("planner", kind, DECENTRALIZED)
+    registry = model_registry(model)
+    try:
+        models = registry.models_for(kind, cell) if kind in OPT_KINDS else []
+    except NehmoError as exc:
+        raise NehmoError(f"parameter `model` ({model!r}): {exc}") from None
+    if kind in OPT_KINDS and not models:
+        raise InvalidValueError(
+            "model", f"provides no pair value model for the arms of cell {cell.name!r}", model
+        )
+    planner = make_planner(kind, cell, arm_id, models, settings)
+    if isinstance(planner, NehmoPlanner) and planner.peers_unmodelled and not allow_unmodelled:
+        raise InvalidValueError(
+            "model",
+            f"covers no pair of arm {arm_id!r} with its peers in reach "
+            f"{list(planner.peers_unmodelled)}; those peers would not be constrained "
+            "(set allow_unmodelled:=true to accept that)",
+            model,
+        )
+    return planner
+
+
+def warm_up(planner: Planner, cell: Cell, arm_id: str, calls: int = 3) -> None:
+    """Solve a few times at the joint zeros of every arm (arms overlapping: the constrained
+    path), so that first-call costs (buffers, caches) do not fall on the first real ticks."""
+    q = {a.arm_id: np.clip(np.zeros(a.robot.dof), a.robot.lower, a.robot.upper) for a in cell.arms}
+    peers = {a: v for a, v in q.items() if a != arm_id}
+    goal = q[arm_id] + 0.3
+    for _ in range(calls):
+        planner.plan(q[arm_id], peers, goal)
+    fail_safe = getattr(planner, "fail_safe", None)
+    if fail_safe is not None:
+        fail_safe(q[arm_id], peers)
+    planner.reset()

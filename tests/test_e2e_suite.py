@@ -1,0 +1,113 @@
+"""The node suite end to end: bridge, two planners and the recorder as separate processes.
+
+One dual-UR5 episode (scenario 0 of seed 0: the naive planner collides 0.6 s in, so the arms
+must coordinate) runs through ``orchestrate`` over the embedded runtime on loopback, in this
+test run's own DDS domain, with the synthetic pair value models (the trained ones do not ship
+yet). Meanwhile an independent cyclonedds participant with its own ROS-named types reads the
+bridge's joint states. Tolerance against the batch runner (same scenario, same models): the
+outcome is equal; the time to success within 1.5 s and the path length within 35 %, because the
+processes run asynchronously on a loaded 2-core machine (solves that overrun their deadline
+become fail-safe commands, which the lock-step batch run never sees).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from _ros_testutil import DOMAIN_ID, finish, start
+
+from nehmo_core.eval.episode import EpisodeSettings, run_episode
+from nehmo_core.eval.metrics import EpisodeResult
+from nehmo_core.eval.planners import ModelRegistry, build_planners, parse_value_models
+from nehmo_core.robots import load_cell
+from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
+from nehmo_ros.orchestrate import EpisodeRun, SuiteSettings
+from nehmo_ros.orchestrate import run_episode as run_ros_episode
+
+CELL = load_cell("dual_ur5")
+SEED, INDEX = 0, 0
+
+
+@pytest.fixture(scope="module")
+def scenario_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    scenarios = generate_scenario_set(CELL, SEED, INDEX + 1)
+    return save_scenario_set(scenarios, tmp_path_factory.mktemp("e2e") / "scenarios.json")
+
+
+@pytest.fixture(scope="module")
+def suite(scenario_file: Path) -> tuple[EpisodeRun, list[dict[str, Any]]]:
+    """The orchestrated episode, and what the independent participant received."""
+    reader = start("plain_sub", "120", "rt/ur5_0/joint_states")
+    try:
+        settings = SuiteSettings(
+            planner="nehmo", model="synthetic", time_limit=20.0, domain_id=DOMAIN_ID
+        )
+        run = run_ros_episode(scenario_file, INDEX, scenario_file.parent, settings)
+    finally:
+        _, out, _ = finish(reader, timeout=10)
+    received = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    return run, received
+
+
+@pytest.fixture(scope="module")
+def batch(scenario_file: Path) -> EpisodeResult:
+    from nehmo_core.sim.scenarios import load_scenario_set
+
+    scenario = load_scenario_set(scenario_file).scenarios[INDEX]
+    registry = ModelRegistry(parse_value_models(["synthetic"]))
+    kinds = dict.fromkeys(CELL.arm_ids, "nehmo")
+    planners = build_planners(CELL, kinds, scenario, 0.04, registry)
+    return run_episode(CELL, scenario, planners, EpisodeSettings(), kinds=kinds)
+
+
+def test_both_arms_reach_their_goals_without_collision(suite: Any) -> None:
+    run, _ = suite
+    assert run.error == "", run.error
+    assert all(code == 0 for code in run.exit_codes.values()), run.exit_codes
+    result = run.result
+    assert result is not None
+    assert result.outcome == "success"
+    assert not result.collisions
+    assert all(err < 0.1 for err in result.final_errors.values()), result.final_errors
+    assert set(result.plan_times) == set(CELL.arm_ids)
+    assert all(len(t) > 50 for t in result.plan_times.values())  # every arm kept planning
+
+
+def test_log_opens_with_the_mcap_and_rosbags_readers(suite: Any) -> None:
+    from mcap.reader import make_reader
+    from rosbags.highlevel import AnyReader
+
+    run, _ = suite
+    with run.log.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None and summary.statistics is not None
+    topics = {ch.topic for ch in summary.channels.values()}
+    assert {"/ur5_0/joint_states", "/ur5_1/velocity_controller/commands", "/clock"} <= topics
+    with AnyReader([run.log]) as reader:
+        assert reader.message_count == summary.statistics.message_count
+        states = [c for c in reader.connections if c.topic == "/ur5_1/joint_states"]
+        first = next(iter(reader.messages(states)))
+        msg = reader.deserialize(first[2], states[0].msgtype)
+        assert list(msg.name) == list(CELL.arm("ur5_1").robot.joint_names)  # type: ignore[attr-defined]
+
+
+def test_metrics_equal_the_batch_runner_within_tolerance(suite: Any, batch: EpisodeResult) -> None:
+    run, _ = suite
+    ros = run.result
+    assert ros is not None
+    assert batch.outcome == ros.outcome == "success"
+    assert abs(ros.end_time - batch.end_time) <= 1.5, (ros.end_time, batch.end_time)
+    assert ros.path_length == pytest.approx(batch.path_length, rel=0.35)
+    ros_ms = [t * 1e3 for t in ros.plan_time_samples()]
+    assert sum(ros_ms) / len(ros_ms) < 30.0  # mean solve well inside the 30 ms deadline
+
+
+def test_independent_participant_receives_the_bridge_joint_states(suite: Any) -> None:
+    _, received = suite
+    assert received, "the plain cyclonedds participant received nothing"
+    assert received[0]["type"] == "sensor_msgs::msg::dds_::JointState_"
+    assert received[0]["name"] == list(CELL.arm("ur5_0").robot.joint_names)
+    assert len(received[0]["position"]) == 6

@@ -1,0 +1,304 @@
+"""Evaluation: the episode runner's stops and latency, metrics from logs, scenario files."""
+
+from __future__ import annotations
+
+import functools
+import json
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
+from nehmo_core.eval.episode import EpisodeSettings, run_episode
+from nehmo_core.eval.episode_log import read_episode_log
+from nehmo_core.eval.metrics import aggregate, evaluate_log
+from nehmo_core.eval.planners import parse_value_models
+from nehmo_core.eval.scenario_sets import naive_collides, scenario_set_for
+from nehmo_core.eval.setups import get_setup, parse_row
+from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.hjr.networks import NetworkSettings
+from nehmo_core.planning.baselines import NaivePlanner
+from nehmo_core.planning.interface import PlanResult, Telemetry
+from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.synthetic import random_value_function
+from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.robots import load_cell
+from nehmo_core.sim.cell_sim import CellSimulator
+from nehmo_core.sim.scenarios import (
+    Scenario,
+    ScenarioFileError,
+    generate_scenario_set,
+    load_scenario_set,
+    sample_scenario,
+    save_scenario_set,
+    scenario_rng,
+)
+
+DUAL = load_cell("dual_ur5")
+DT = 0.04
+
+
+def _naive(cell=DUAL):
+    return {a: NaivePlanner(cell, a) for a in cell.arm_ids}
+
+
+@functools.cache
+def _scenario_where_naive(outcome: str, time_limit: float = 20.0, limit: int = 40) -> Scenario:
+    settings = EpisodeSettings(time_limit=time_limit)
+    with CellSimulator(DUAL, settings.substeps) as sim:
+        for i in range(limit):
+            sc = sample_scenario(DUAL, scenario_rng(0, i), sim.world)
+            if run_episode(DUAL, sc, _naive(), settings, simulator=sim).outcome == outcome:
+                return sc
+    raise AssertionError(f"no naive {outcome} in {limit} scenarios")
+
+
+class _Recording:
+    """Commands joint 0 at 0.01·(call number + 1) rad/s and records what it observed."""
+
+    def __init__(self, arm_id: str) -> None:
+        self.arm_id = arm_id
+        self.seen: list[np.ndarray] = []
+
+    def reset(self) -> None:
+        self.seen = []
+
+    def plan(self, q_self, peers: Mapping[str, np.ndarray], q_goal) -> PlanResult:
+        self.seen.append(np.array(q_self))
+        u = np.zeros(6)
+        u[0] = 0.01 * len(self.seen)
+        return PlanResult(u, Telemetry(1e-4 * len(self.seen), "recording"))
+
+
+def test_stops_at_success_within_tolerance() -> None:
+    with CellWorld(DUAL) as world:
+        sc = sample_scenario(DUAL, scenario_rng(0, 1), world)
+    goal = {a: q + np.array([0.3, 0, 0, 0, 0, 0]) for a, q in sc.start.items()}
+    result = run_episode(DUAL, Scenario(sc.start, goal), _naive())
+    assert result.outcome == "success"
+    # 1 tick of latency, then 0.2 rad at 0.5 rad/s (0.02 rad per tick) to be within 0.1 rad
+    assert result.ticks == 1 + 10
+    assert all(e < 0.1 for e in result.final_errors.values())
+
+
+def test_stops_at_the_first_colliding_tick(tmp_path: Path) -> None:
+    sc = _scenario_where_naive("collision")
+    result = run_episode(DUAL, sc, _naive(), log_path=tmp_path / "c.mcap")
+    assert result.outcome == "collision" and result.collisions
+    log = read_episode_log(tmp_path / "c.mcap")
+    assert log.stamps[-1] == result.end_ns and len(log.collisions) == 1
+    with CellWorld(DUAL) as world:  # the tick before was free: the runner did not stop late
+        world.set_configuration({a: log.positions[a][-2] for a in DUAL.arm_ids})
+        assert not world.in_collision()
+
+
+def test_stops_at_the_time_limit() -> None:
+    sc = _scenario_where_naive("success")
+    hold = {a: _Recording(a) for a in DUAL.arm_ids}
+    for p in hold.values():
+        p.plan = lambda q, peers, goal: PlanResult(np.zeros(6), Telemetry(0.0, "hold"))  # type: ignore[method-assign]
+    result = run_episode(DUAL, sc, hold, EpisodeSettings(time_limit=0.4))
+    assert result.outcome == "stuck" and result.ticks == 10 and result.end_time == 0.4
+    assert result.path_length == 0.0
+
+
+def test_command_of_tick_k_was_planned_from_tick_k_minus_1(tmp_path: Path) -> None:
+    sc = _scenario_where_naive("success")
+    planners = {a: _Recording(a) for a in DUAL.arm_ids}
+    result = run_episode(
+        DUAL, sc, planners, EpisodeSettings(time_limit=0.4), log_path=tmp_path / "l.mcap"
+    )
+    log = read_episode_log(tmp_path / "l.mcap")
+    q = log.positions["ur5_0"]
+    # the planner saw the state of its tick
+    np.testing.assert_array_equal(np.array(planners["ur5_0"].seen), q[:-1])
+    # tick 0 holds still; during tick k the arm moves by the command of call k (1-based) = k − 1
+    moved = np.diff(q[:, 0])
+    assert moved[0] == 0.0
+    np.testing.assert_allclose(moved[1:], 0.01 * np.arange(1, 10) * DT, atol=1e-12)
+    # logged: the command taking effect at t_{k+1}, planned from observations at t_k
+    for t_ns, record in log.statuses["ur5_0"]:
+        assert t_ns - record.observation_ns == round(DT * 1e9)
+    assert result.plan_times["ur5_0"] == tuple(1e-4 * np.arange(1, 11))
+
+
+def _small_nehmo_planners() -> dict:
+    vf = random_value_function("ur5_ur5", "bc+sym", NetworkSettings(width=16, hidden_layers=1))
+    model = PairValueModel.from_value_function(vf, "test_eval_bcsym", backend="vm")
+    return {
+        "ur5_0": NehmoPlanner(DUAL, "ur5_0", [model]),
+        "ur5_1": NaivePlanner(DUAL, "ur5_1"),
+    }
+
+
+def test_metrics_from_logs_equal_the_runner_results(tmp_path: Path) -> None:
+    scenarios = [_scenario_where_naive("collision", 6.0), _scenario_where_naive("success", 6.0)]
+    kinds = {"ur5_0": "nehmo", "ur5_1": "naive"}
+    settings = EpisodeSettings(time_limit=6.0)
+    memory, logged = [], []
+    naive_kinds = dict.fromkeys(DUAL.arm_ids, "naive")
+    runs = [(scenarios[0], _naive(), naive_kinds), (scenarios[1], _naive(), naive_kinds)]
+    runs.append((scenarios[0], _small_nehmo_planners(), kinds))
+    for i, (sc, planners, k) in enumerate(runs):
+        path = tmp_path / f"episode_{i}.mcap"
+        memory.append(run_episode(DUAL, sc, planners, settings, kinds=k, log_path=path))
+        logged.append(evaluate_log(path))
+    assert {r.outcome for r in memory} >= {"collision", "success"}
+    for m, g in zip(memory, logged, strict=True):
+        assert m == g  # every field: outcome, times, path lengths, plan times, statuses, ...
+    assert aggregate(memory) == aggregate(logged)
+    assert any(sum(r.plan_times["ur5_0"]) > 0 for r in logged)
+
+
+def test_scenario_files_round_trip(tmp_path: Path) -> None:
+    made = generate_scenario_set(DUAL, seed=3, count=2, meta={"setup": "dual_ur5"})
+    path = save_scenario_set(made, tmp_path / "s.json")
+    back = load_scenario_set(path)
+    assert back.indices == (0, 1) and back.seed == 3 and back.meta == {"setup": "dual_ur5"}
+    for a, b in zip(made.scenarios, back.scenarios, strict=True):
+        for arm in DUAL.arm_ids:
+            np.testing.assert_array_equal(a.start[arm], b.start[arm])
+            np.testing.assert_array_equal(a.goal[arm], b.goal[arm])
+    # scenario i is reproducible on its own
+    again = sample_scenario(DUAL, scenario_rng(3, 1))
+    np.testing.assert_array_equal(again.goal["ur5_1"], back.scenarios[1].goal["ur5_1"])
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda d: d.update(format="other"), "format must be 'nehmo-scenarios'"),
+        (lambda d: d.update(version=9), "version 9 is not supported"),
+        (lambda d: d.update(cell="nowhere"), "unknown cell 'nowhere'"),
+        (lambda d: d.pop("seed"), "missing key 'seed'"),
+        (lambda d: d["scenarios"][0]["start"].pop("ur5_1"), r"scenarios\[0\].start: arms"),
+        (lambda d: d["scenarios"][1]["goal"]["ur5_0"].pop(), r"scenarios\[1\].goal.ur5_0"),
+        (lambda d: d["scenarios"][0]["goal"]["ur5_0"].__setitem__(1, 9.0), "joint limits"),
+        (lambda d: d["scenarios"][0].update(index="a"), "expected int"),
+        (lambda d: d.update(scenarios=[]), "the set is empty"),
+    ],
+)
+def test_bad_scenario_files_raise_naming_the_field(tmp_path: Path, edit, message) -> None:
+    made = generate_scenario_set(DUAL, seed=3, count=2)
+    path = save_scenario_set(made, tmp_path / "s.json")
+    data = json.loads(path.read_text())
+    edit(data)
+    path.write_text(json.dumps(data))
+    with pytest.raises(ScenarioFileError, match=message):
+        load_scenario_set(path)
+
+
+def test_unreadable_scenario_files(tmp_path: Path) -> None:
+    with pytest.raises(ScenarioFileError, match="not found"):
+        load_scenario_set(tmp_path / "missing.json")
+    (tmp_path / "bad.json").write_text("{not json")
+    with pytest.raises(ScenarioFileError, match="not valid JSON"):
+        load_scenario_set(tmp_path / "bad.json")
+
+
+def test_challenging_set_keeps_exactly_the_naive_collisions(tmp_path: Path) -> None:
+    setup = get_setup("ur5_kinova_challenging")
+    chosen = scenario_set_for(setup, seed=0, count=2, directory=tmp_path)
+    assert (tmp_path / "ur5_kinova_challenging_seed0.json").exists()
+    cell = load_cell("ur5_kinova")
+    settings = EpisodeSettings.for_setup(setup)
+    with CellSimulator(cell, settings.substeps) as sim:
+        collides = naive_collides(cell, settings, sim)
+        for index in range(chosen.candidates):
+            sc = sample_scenario(cell, scenario_rng(0, index), sim.world)
+            assert collides(sc) == (index in chosen.indices)
+    again = scenario_set_for(setup, seed=0, count=1, directory=tmp_path)  # read back, cut
+    assert again.indices == chosen.indices[:1]
+
+
+def test_rows_and_value_model_sources_are_checked() -> None:
+    kinova = load_cell("ur5_kinova")
+    assert parse_row("nehmo/reckless", kinova) == {"ur5_0": "nehmo", "kinova_0": "reckless"}
+    assert parse_row("chomp", DUAL) == {"ur5_0": "chomp", "ur5_1": "chomp"}
+    with pytest.raises(UnknownNameError, match="nehmo"):
+        parse_row("rrt", DUAL)
+    with pytest.raises(InvalidValueError, match="one per arm"):
+        parse_row("nehmo/naive/naive", DUAL)
+    with pytest.raises(InvalidValueError, match="cannot be mixed"):
+        parse_row("chomp/naive", DUAL)
+    with pytest.raises(UnknownNameError, match="setup"):
+        get_setup("quad_ur5")
+    specs = parse_value_models(["synthetic", "nehmo_no_sym=/runs/bc"])
+    assert [(s.kind, s.source) for s in specs] == [
+        (None, "synthetic"),
+        ("nehmo_no_sym", "/runs/bc"),
+    ]
+    with pytest.raises(InvalidValueError, match="KIND"):
+        parse_value_models(["nemo=x"])
+
+
+def test_episode_settings_are_checked() -> None:
+    with pytest.raises(InvalidValueError, match="`rate`"):
+        EpisodeSettings(rate=0)
+    with pytest.raises(UnknownNameError, match="l2"):
+        EpisodeSettings(success_norm="l1")
+    five = EpisodeSettings.for_setup(get_setup("five_ur5"))
+    assert (five.time_limit, five.success_norm, five.success_tolerance) == (30.0, "max", 0.03)
+    assert five.max_ticks == 750 and five.period_ns == 40_000_000
+    with pytest.raises(NehmoError, match="planner"):
+        run_episode(DUAL, _scenario_where_naive("success"), {"ur5_0": _naive()["ur5_0"]})
+
+
+def test_renders_from_a_log(tmp_path: Path) -> None:
+    from PIL import Image
+
+    from nehmo_core.eval.render import plot_distances, render_gif
+
+    sc = _scenario_where_naive("collision")
+    run_episode(DUAL, sc, _naive(), EpisodeSettings(time_limit=1.0), log_path=tmp_path / "e.mcap")
+    log = read_episode_log(tmp_path / "e.mcap")
+    gif = render_gif(log, tmp_path / "e.gif", fps=5, size=(96, 72))
+    with Image.open(gif) as im:
+        assert im.n_frames >= 2 and im.size == (96, 72)
+    png = plot_distances(log, tmp_path / "d.png", stride=5)
+    assert png.stat().st_size > 1000
+
+
+def test_evaluate_command_writes_logs_summary_and_table(tmp_path: Path) -> None:
+    import argparse
+
+    from nehmo_core.eval import cli
+
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    argv = ["--setup", "dual_ur5", "--planners", "naive", "--episodes", "2", "--no-progress"]
+    args = parser.parse_args([*argv, "--out", str(tmp_path)])
+    assert cli.run(args) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    row = summary["rows"][0]
+    assert row["log_check"] == "ok" and row["ours"]["episodes"] == 2
+    assert row["paper"]["sr"] == 66
+    logs = sorted((tmp_path / "logs" / "naive").glob("*.mcap"))
+    assert [p.name for p in logs] == ["episode_0000.mcap", "episode_0001.mcap"]
+    assert "| naive | 2 |" in (tmp_path / "summary.md").read_text()
+    assert load_scenario_set(tmp_path / "scenarios" / "dual_ur5_seed0.json").indices == (0, 1)
+    out = tmp_path / "bad"
+    bad = parser.parse_args(["--setup", "dual_ur5", "--planners", "nehmo/x", "--out", str(out)])
+    with pytest.raises(UnknownNameError, match="planner"):
+        cli.run(bad)
+    assert not out.exists()
+
+
+def test_value_model_snapshots_freeze_a_training_run(tmp_path: Path) -> None:
+    from nehmo_core.eval.planners import snapshot_value_models
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "checkpoint.safetensors").write_bytes(b"weights-1")
+    (run / "checkpoint.json").write_text("{}")
+    sources = parse_value_models(["synthetic", f"nehmo={run}"])
+    snap = snapshot_value_models(sources, tmp_path / "snap")
+    assert snap[0] == sources[0] and snap[1].kind == "nehmo"
+    copied = Path(snap[1].source)
+    assert copied.read_bytes() == b"weights-1" and copied.with_suffix(".json").exists()
+    (run / "checkpoint.safetensors").write_bytes(b"weights-2")  # training moves on
+    assert copied.read_bytes() == b"weights-1"
+    with pytest.raises(NehmoError, match="no weights file"):
+        snapshot_value_models(parse_value_models([str(tmp_path / "none")]), tmp_path / "snap")

@@ -1,0 +1,47 @@
+"""Invalid node parameters stop the node with one line naming the parameter, rule and value."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+from _ros_testutil import child_env
+
+CASES = [
+    ("nehmo_ros.arm_planner", ["cell:=dual_ur5"], "`arm_id` is required"),
+    ("nehmo_ros.arm_planner", ["cell:=dual_ur5", "arm_id:=ur5_9"], "`arm_id` must name an arm"),
+    (
+        "nehmo_ros.arm_planner",
+        ["cell:=dual_ur5", "arm_id:=ur5_0", "planner:=naive", "epsilon:=-0.1"],
+        "`epsilon` must be > 0; got -0.1",
+    ),
+    (
+        "nehmo_ros.arm_planner",
+        ["cell:=dual_ur5", "arm_id:=ur5_0", "planner:=magic"],
+        "unknown planner 'magic'",
+    ),
+    ("nehmo_ros.arm_planner", ["cell:=dual_ur5", "arm_id:=ur5_0", "rate:=25"], "`rate`"),
+    ("sim_bridge.bridge", ["cell:=dual_ur5", "physics_rate:=-5.0"], "`physics_rate` must be"),
+    ("sim_bridge.bridge", ["cell:=no_such_cell"], "unknown cell 'no_such_cell'"),
+    ("nehmo_ros.recorder", ["cell:=dual_ur5", "output:=run.txt"], "`output` must be a path"),
+]
+
+
+@pytest.mark.parametrize(
+    ("module", "params", "expected"),
+    CASES,
+    ids=["no_arm_id", "unknown_arm", "epsilon", "planner", "rate_type", "bridge", "cell", "out"],
+)
+def test_invalid_parameter_stops_the_node_with_one_line(
+    module: str, params: list[str], expected: str
+) -> None:
+    argv = [sys.executable, "-m", module, "--ros-args"]
+    for p in params:
+        argv += ["-p", p]
+    proc = subprocess.run(argv, env=child_env(), capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if "pybullet build time" not in line]
+    assert len(lines) == 1, proc.stderr
+    assert expected in lines[0], lines[0]
+    assert "Traceback" not in proc.stderr
