@@ -27,6 +27,12 @@ _COMMANDS: dict[str, tuple[str, str, str, str]] = {
         "run",
         "learned arm-arm distance: generate data, train, evaluate",
     ),
+    "evaluate": (
+        "nehmo_core.eval.cli",
+        "add_arguments",
+        "run",
+        "evaluate planners on the paper's setups (metrics from MCAP logs)",
+    ),
     "train": (
         "nehmo_core.hjr.train",
         "add_train_arguments",
