@@ -8,11 +8,17 @@ import time
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from nehmo_core.errors import InvalidValueError, ModelFileError
 from nehmo_core.geometry.distance_data import PAIRS, DatasetSpec, generate
 from nehmo_core.geometry.distance_model import MODELS_DIR, load_distance_file
-from nehmo_core.geometry.distance_train import DistanceTrainSettings, evaluate, train
+from nehmo_core.geometry.distance_train import (
+    DistanceTrainSettings,
+    calibrate_offset,
+    evaluate,
+    train,
+)
 
 
 def _count(text: str) -> int:
@@ -39,6 +45,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     t.add_argument("--epochs", type=int, default=DistanceTrainSettings.epochs)
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--out", type=Path, help="output .safetensors (default: the shipped model)")
+    c = sub.add_parser(
+        "calibrate",
+        help="raise a model's conservative offset so a calibration set meets a false-safe rate",
+    )
+    c.add_argument("--pair", choices=sorted(PAIRS), required=True)
+    c.add_argument("--data", type=Path, required=True, help="calibration .npz (not test data)")
+    c.add_argument("--test", type=Path, help="held-out .npz to re-report accuracy on")
+    c.add_argument("--target", type=float, default=0.015, help="false-safe rate to reach")
+    c.add_argument("--model", type=Path, help="model .safetensors (default: the shipped model)")
     e = sub.add_parser("evaluate", help="accuracy of a distance model on a labelled .npz")
     e.add_argument("--pair", choices=sorted(PAIRS), required=True)
     e.add_argument("--data", type=Path, required=True)
@@ -61,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.action == "train":
         return _train(args)
+    if args.action == "calibrate":
+        return _calibrate(args)
     if args.action == "evaluate":
         path = args.model or MODELS_DIR / f"distance_{args.pair}.safetensors"
         q, d, _ = load_dataset(args.data)
@@ -75,6 +92,31 @@ def load_dataset(path: Path) -> tuple[np.ndarray, np.ndarray, dict[str, object]]
         raise ModelFileError(f"dataset not found: {path}")
     with np.load(path, allow_pickle=False) as f:
         return f["q"], f["d"], json.loads(str(f["meta"]))
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    """Offset = max(current, the one the calibration set needs); the card records both."""
+    path = args.model or MODELS_DIR / f"distance_{args.pair}.safetensors"
+    model = load_distance_file(path, args.pair)
+    card = json.loads(path.with_suffix(".json").read_text())
+    before = float(model.output_offset)
+    q, d, meta = load_dataset(args.data)
+    needed = calibrate_offset(model, q, d, args.target)  # sets the offset it found
+    offset = max(before, needed)
+    with torch.no_grad():
+        model.output_offset.fill_(offset)
+    card["training"]["output_offset_m"] = offset
+    card.setdefault("calibrations", []).append(
+        {"data": meta, "target_false_safe": args.target, "needed_m": needed, "before_m": before}
+    )
+    if args.test is not None:
+        qt, dt, meta_t = load_dataset(args.test)
+        card["accuracy_held_out"] = {"data": meta_t, **evaluate(model, qt, dt)}
+    card.pop("config", None)
+    card.pop("format_version", None)
+    model.save(path, card)
+    print(f"offset {before * 1000:.1f} mm -> {offset * 1000:.1f} mm; wrote {path}")
+    return 0
 
 
 def _train(args: argparse.Namespace) -> int:
