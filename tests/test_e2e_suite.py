@@ -43,7 +43,11 @@ def suite(scenario_file: Path) -> tuple[EpisodeRun, list[dict[str, Any]]]:
     reader = start("plain_sub", "120", "rt/ur5_0/joint_states")
     try:
         settings = SuiteSettings(
-            planner="nehmo", model="synthetic", time_limit=20.0, domain_id=DOMAIN_ID
+            planner="nehmo",
+            model="synthetic",
+            time_limit=20.0,
+            domain_id=DOMAIN_ID,
+            startup_timeout=240.0,  # generous: a loaded CI machine starts processes slowly
         )
         run = run_ros_episode(scenario_file, INDEX, scenario_file.parent, settings)
     finally:
