@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import signal
 import subprocess
@@ -37,6 +36,7 @@ from typing import IO, Any
 
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log
+from nehmo_core.eval.report import json_safe
 from nehmo_core.eval.setups import parse_row
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenarios import (
@@ -247,16 +247,6 @@ def run_episode(
     return EpisodeRun(episode, log_path, result, codes, wall)
 
 
-def _clean(x: Any) -> Any:
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_clean(v) for v in x]
-    return x
-
-
 def run_suite(
     scenario_file: Path, episodes: Sequence[int], out_dir: Path, settings: SuiteSettings
 ) -> dict[str, Any]:
@@ -287,7 +277,7 @@ def run_suite(
             for r in runs
         ],
     }
-    (out_dir / "summary.json").write_text(json.dumps(_clean(summary), indent=1) + "\n")
+    (out_dir / "summary.json").write_text(json.dumps(json_safe(summary), indent=1) + "\n")
     return summary
 
 

@@ -12,17 +12,17 @@ from typing import Any
 from nehmo_core.eval.batch import RowRun
 from nehmo_core.eval.paper import PAPER_NOTES, paper_row
 
-__all__ = ["markdown_table", "row_summary", "setup_summary", "write_summary"]
+__all__ = ["json_safe", "markdown_table", "row_summary", "setup_summary", "write_summary"]
 
 
-def _clean(x: Any) -> Any:
+def json_safe(x: Any) -> Any:
     """JSON-safe: NaN and inf become None."""
     if isinstance(x, float) and not math.isfinite(x):
         return None
     if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
+        return {k: json_safe(v) for k, v in x.items()}
     if isinstance(x, list | tuple):
-        return [_clean(v) for v in x]
+        return [json_safe(v) for v in x]
     return x
 
 
@@ -64,7 +64,7 @@ def row_summary(setup: str, run: RowRun) -> dict[str, Any]:
 def setup_summary(
     setup: str, runs: Sequence[RowRun], extra: Mapping[str, Any] | None = None
 ) -> dict[str, Any]:
-    return _clean(
+    return json_safe(
         {
             "setup": setup,
             "machine": {"python": platform.python_version(), "platform": platform.platform()},
