@@ -6,9 +6,8 @@ stopped and evaluated by ``nehmo_ros.orchestrate``. The scenario is one where th
 collides within a second, so the arms must coordinate. The metrics come from the MCAP log alone
 (``nehmo_core.eval``); a GIF and a distance plot of the episode are rendered from it too.
 
-Until trained value functions ship, the planners use the synthetic stand-ins (``--model
-synthetic``: the learned distance plus a small random residual, not a reachability value);
-pass ``--model PATH`` for a training run directory. Needs the ``nehmo_ros`` and ``sim_bridge``
+The planners use the shipped UR5-UR5 value function (``--model shipped``); ``--model
+synthetic`` gives stand-ins for plumbing checks, ``--model PATH`` a training run directory. Needs the ``nehmo_ros`` and ``sim_bridge``
 packages installed (``./run`` installs them).
 """
 
@@ -25,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="scenario set seed")
     parser.add_argument("--index", type=int, default=0, help="scenario index in the set")
     parser.add_argument("--planner", default="nehmo", help="planner kind (or one per arm, '/')")
-    parser.add_argument("--model", default="synthetic", help="synthetic | shipped | PATH")
+    parser.add_argument("--model", default="shipped", help="shipped | synthetic | PATH")
     parser.add_argument("--time-limit", type=float, default=20.0, help="[s] of simulated time")
     parser.add_argument("--out", default="out/demo", help="output directory")
     parser.add_argument("--no-render", action="store_true", help="skip the GIF and plot")
