@@ -1,0 +1,50 @@
+"""The 12-D arm-pair systems: boundary, symmetry and the Kinova-controls game."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.hjr.arm_pairs import ARM_PAIRS, make_arm_pair_system
+from nehmo_core.robots.loader import cell_from_dict
+
+
+@pytest.mark.parametrize("pair", ARM_PAIRS)
+def test_boundary_is_invariant_under_the_symmetry(pair: str) -> None:
+    system = make_arm_pair_system(pair)
+    x = system.sample_states(2000, torch.Generator().manual_seed(0))
+    with torch.no_grad():
+        diff = (system.boundary(x) - system.boundary(system.symmetry(x))).abs().max()
+    assert float(diff) < 1e-4  # float32 model
+    assert system.in_train(x).float().mean().item() == pytest.approx(0.5, abs=0.05)
+    assert bool(system.in_train(system.fold(x)).all())
+
+
+def test_kinova_controls_game_sees_the_same_geometry() -> None:
+    """kinova_ur5 puts the Kinova at the origin: its boundary must match that cell exactly."""
+    system = make_arm_pair_system("kinova_ur5")
+    cell = cell_from_dict(
+        {
+            "name": "kinova_ur5",
+            "arms": [
+                {"id": "k", "robot": "kinova_gen3_6dof"},
+                {"id": "u", "robot": "ur5", "base": {"xyz": [0.6, 0, 0], "rpy": [0, 0, np.pi]}},
+            ],
+        }
+    )
+    rng = np.random.default_rng(0)
+    errors = []
+    with CellWorld(cell) as world:
+        for _ in range(300):
+            qk, qu = rng.uniform(-2.2, 2.2, 6), rng.uniform(-np.pi, np.pi, 6)
+            world.set_joint_positions("k", qk)
+            world.set_joint_positions("u", qu)
+            d = world.distance("k", "u", 1.0)
+            if d < 0.1:
+                x = torch.tensor(np.concatenate([qk, qu])[None], dtype=torch.float32)
+                with torch.no_grad():
+                    errors.append(abs(float(system.boundary(x)) - d))
+    assert len(errors) > 30
+    assert np.mean(errors) < 0.025
