@@ -116,6 +116,13 @@ def test_learning_rate_schedules() -> None:
         TrainSettings(lr_final_fraction=0.0)
 
 
+def test_presets() -> None:
+    assert TrainSettings.preset("cpu_legacy") == TrainSettings()  # resumes the first CPU runs
+    cpu = TrainSettings.preset("cpu", variant="bc")
+    assert cpu.variant == "bc" and cpu.lr_schedule == "cosine" and cpu.network.width == 64
+    assert TrainSettings.preset("authors").network.width == 512
+
+
 def test_checkpoint_from_before_the_schedule_fields_resumes(tmp_path: Path) -> None:
     """A sidecar without ``lr_schedule``/``lr_final_fraction`` means a constant rate."""
     train(Air3D(), TINY, tmp_path / "old", progress=False, stop_after_steps=5)
