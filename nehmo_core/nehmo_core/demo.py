@@ -7,8 +7,8 @@ collides within a second, so the arms must coordinate. The metrics come from the
 (``nehmo_core.eval``); a GIF and a distance plot of the episode are rendered from it too.
 
 The planners use the shipped UR5-UR5 value function (``--model shipped``); ``--model
-synthetic`` gives stand-ins for plumbing checks, ``--model PATH`` a training run directory. Needs the ``nehmo_ros`` and ``sim_bridge``
-packages installed (``./run`` installs them).
+synthetic`` gives stand-ins for plumbing checks, ``--model PATH`` a training run directory.
+Needs the ``nehmo_ros`` and ``sim_bridge`` packages installed (``./run`` installs them).
 """
 
 from __future__ import annotations
