@@ -8,6 +8,7 @@ annotations`` here: cyclonedds resolves the annotations at run time. Nodes never
 publishers convert from, and subscriptions to, the dataclasses of ``nehmo_core.logs.messages``.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -126,17 +127,21 @@ def _convert_out(kind: str, value: Any) -> Any:
     return to_idl(value, kind)
 
 
+def _field_values(obj: Any, msgtype: str, convert: Callable[[str, Any], Any]) -> dict[str, Any]:
+    """Every field of ``msgtype`` read from ``obj`` and passed through ``convert``."""
+    values: dict[str, Any] = {}
+    for spec in MESSAGE_TYPES[msgtype]._FIELDS:
+        value = getattr(obj, spec.name)
+        if spec.sequence:
+            values[spec.name] = [convert(spec.kind, item) for item in value]
+        else:
+            values[spec.name] = convert(spec.kind, value)
+    return values
+
+
 def to_idl(msg: Any, msgtype: str) -> IdlStruct:
     """The IdlStruct sample of `msg` (our dataclass, or anything with the same fields)."""
-    cls = MESSAGE_TYPES[msgtype]
-    values: dict[str, Any] = {}
-    for spec in cls._FIELDS:
-        value = getattr(msg, spec.name)
-        if spec.sequence:
-            values[spec.name] = [_convert_out(spec.kind, item) for item in value]
-        else:
-            values[spec.name] = _convert_out(spec.kind, value)
-    return IDL_TYPES[msgtype](**values)
+    return IDL_TYPES[msgtype](**_field_values(msg, msgtype, _convert_out))
 
 
 def _convert_in(kind: str, value: Any) -> Any:
@@ -149,12 +154,4 @@ def _convert_in(kind: str, value: Any) -> Any:
 
 def from_idl(sample: Any, msgtype: str) -> RosMessage:
     """Our dataclass from an IdlStruct sample."""
-    cls = MESSAGE_TYPES[msgtype]
-    values: dict[str, Any] = {}
-    for spec in cls._FIELDS:
-        value = getattr(sample, spec.name)
-        if spec.sequence:
-            values[spec.name] = [_convert_in(spec.kind, item) for item in value]
-        else:
-            values[spec.name] = _convert_in(spec.kind, value)
-    return cls(**values)
+    return MESSAGE_TYPES[msgtype](**_field_values(sample, msgtype, _convert_in))
