@@ -14,9 +14,8 @@ from nehmo_core.planning.baselines import NaivePlanner
 from nehmo_core.planning.ipopt_solver import IpoptSolver
 from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver
 from nehmo_core.planning.opt import OptProblem, worst_case_disturbance
-from nehmo_core.planning.qp import project
 from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.sqp import SolveResult, solve_sqp
+from nehmo_core.planning.sqp import SolveResult, qp_step, solve_sqp
 from nehmo_core.planning.synthetic import random_value_function
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots import load_cell
@@ -81,24 +80,45 @@ def test_planner_predicts_peers_with_the_brute_force_worst_case(model: PairValue
     np.testing.assert_allclose(predicted[6:], q2 + 0.1 * worst, atol=1e-12)
 
 
-def test_qp_projection_meets_kkt_conditions() -> None:
+def test_qp_step_meets_kkt_conditions() -> None:
     rng = np.random.default_rng(2)
-    for _ in range(200):
-        n, m = 6, rng.integers(1, 5)
-        N = np.vstack([rng.normal(size=(m, n)), np.eye(n), -np.eye(n)])
-        h = np.concatenate([rng.normal(size=m) - 0.5, -np.ones(2 * n)])
-        w0 = rng.normal(size=n) * 3
-        r = project(w0, N, h)
-        assert r.feasible
-        assert np.all(N @ r.w - h >= -1e-9)
-        assert np.all(r.lam >= -1e-12)
-        np.testing.assert_allclose(r.w - w0, N.T @ r.lam, atol=1e-9)
-        np.testing.assert_allclose(r.lam * (N @ r.w - h), 0.0, atol=1e-9)
+    solved = 0
+    for _ in range(300):
+        n, m = 6, int(rng.integers(1, 5))
+        M = rng.normal(size=(n, n))
+        B = 2.0 * np.eye(n) + 0.1 * M @ M.T
+        grad, J = rng.normal(size=n) * 0.1, rng.normal(size=(m, n))
+        c = rng.normal(size=m) * 0.02
+        y = rng.uniform(-0.05, 0.05, n)
+        lo, hi = -0.05 - y, 0.05 - y
+        r = qp_step(B, grad, c, J, lo, hi)
+        if not r.feasible:
+            continue
+        solved += 1
+        p, lam = r.p, r.lam
+        assert np.all(c + J @ p >= -1e-9) and np.all(p >= lo - 1e-12) and np.all(p <= hi + 1e-12)
+        assert np.all(lam >= 0.0)
+        np.testing.assert_allclose(lam * (c + J @ p), 0.0, atol=1e-9)
+        # stationarity up to the bound multipliers: free coordinates have zero reduced gradient
+        reduced = B @ p + grad - J.T @ lam
+        free = (p > lo + 1e-9) & (p < hi - 1e-9)
+        np.testing.assert_allclose(reduced[free], 0.0, atol=1e-8)
+        assert np.all(reduced[p <= lo + 1e-9] >= -1e-8)  # at a lower bound: pushing down
+        assert np.all(reduced[p >= hi - 1e-9] <= 1e-8)
+    assert solved > 250
 
 
-def test_qp_reports_infeasibility() -> None:
-    N = np.array([[1.0, 0.0], [-1.0, 0.0]])
-    assert not project(np.zeros(2), N, np.array([1.0, 0.0])).feasible
+def test_qp_step_reports_infeasibility() -> None:
+    # p1 ≥ 1 from the linearization, p1 ≤ 0.5 from the box
+    r = qp_step(
+        2.0 * np.eye(2),
+        np.zeros(2),
+        np.array([-1.0]),
+        np.array([[1.0, 0.0]]),
+        np.full(2, -0.5),
+        np.full(2, 0.5),
+    )
+    assert r.flag == -1 and not r.feasible
 
 
 def test_safe_unconstrained_step_equals_the_naive_step(model: PairValueModel) -> None:

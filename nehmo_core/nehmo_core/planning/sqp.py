@@ -4,8 +4,8 @@
    the solution: the cost is convex and its minimizer over the box is feasible.
 2. Otherwise iterate from the warm start: linearize the constraints, solve the QP with the
    Lagrangian Hessian approximation ``B`` (the cost's ``2I`` plus a damped BFGS correction for
-   the constraints' curvature) exactly with :func:`~nehmo_core.planning.qp.project`, and accept
-   the step with a backtracking line search on the ℓ₁ merit function.
+   the constraints' curvature) exactly with DAQP (a dual active-set solver for small dense QPs),
+   and accept the step with a backtracking line search on the ℓ₁ merit function.
 3. Stop when the step and the constraint violation are below ``tol`` (a KKT point, as IPOPT's);
    report ``infeasible`` when a linearization has no feasible point and ``timeout`` when the
    deadline passes.
@@ -16,12 +16,12 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import daqp
 import numpy as np
 
 from nehmo_core.planning.opt import OptProblem
-from nehmo_core.planning.qp import project
 
-__all__ = ["SolveResult", "solve_sqp"]
+__all__ = ["QPStep", "SolveResult", "qp_step", "solve_sqp"]
 
 
 @dataclass(frozen=True)
@@ -39,21 +39,34 @@ class SolveResult:
         return self.status in ("naive", "optimal")
 
 
-def _qp_step(
+@dataclass(frozen=True)
+class QPStep:
+    """The SQP's QP subproblem answer: step ``p``, multipliers of ``c + Jp ≥ 0``, DAQP's flag."""
+
+    p: np.ndarray
+    lam: np.ndarray  # ≥ 0, one per linearized constraint
+    flag: int  # DAQP exit flag: 1 optimal, -1 infeasible, other < 0 solver trouble
+
+    @property
+    def feasible(self) -> bool:
+        return self.flag >= 1
+
+
+def qp_step(
     B: np.ndarray, grad: np.ndarray, c: np.ndarray, J: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, bool]:
-    """``min ½pᵀBp + gradᵀp s.t. c + Jp ≥ 0, lo ≤ p ≤ hi`` → (p, multipliers of c, feasible)."""
-    n = len(grad)
-    try:
-        L = np.linalg.cholesky(B)
-    except np.linalg.LinAlgError:  # lost definiteness to rounding: fall back to the cost's 2I
-        L = np.sqrt(2.0) * np.eye(n)
-    Linv_T = np.linalg.inv(L).T  # p = L⁻ᵀ w
-    rows = np.vstack([J, np.eye(n), -np.eye(n)]) @ Linv_T
-    rhs = np.concatenate([-c, lo, -hi])
-    w0 = -np.linalg.solve(L, grad)
-    result = project(w0, rows, rhs)
-    return Linv_T @ result.w, result.lam[: len(c)], result.feasible
+) -> QPStep:
+    """``min ½pᵀBp + gradᵀp s.t. c + Jp ≥ 0, lo ≤ p ≤ hi`` by DAQP's dual active-set method.
+
+    DAQP solves small dense QPs exactly (up to rounding) and treats the step box as simple
+    bounds. ``B`` must be positive definite; the SQP keeps it so by damped BFGS.
+    """
+    m = len(c)
+    upper = np.concatenate([hi, np.full(m, np.inf)])
+    lower = np.concatenate([lo, -c])
+    p, _, flag, info = daqp.solve(B, grad, J, upper, lower)
+    # DAQP's multipliers satisfy Bp + grad + [I; J]ᵀ lam = 0 with lam ≤ 0 on active lower bounds
+    lam = np.maximum(0.0, -np.asarray(info["lam"], dtype=np.float64)[len(grad) :])
+    return QPStep(np.asarray(p, dtype=np.float64), lam, int(flag))
 
 
 def _merit(problem: OptProblem, y: np.ndarray, c: np.ndarray, rho: float) -> float:
@@ -99,9 +112,12 @@ def solve_sqp(
         if time.perf_counter() > deadline:
             return SolveResult(y, "timeout", iteration, c)
         grad = 2.0 * (problem.error0 + y)
-        p, lam, feasible = _qp_step(B, grad, c, J, -ymax - y, ymax - y)
-        if not feasible:
+        step = qp_step(B, grad, c, J, -ymax - y, ymax - y)
+        if step.flag == -1:
             return SolveResult(y, "infeasible", iteration, c)
+        if not step.feasible:
+            return SolveResult(y, f"failed (QP exit flag {step.flag})", iteration, c)
+        p, lam = step.p, step.lam
         violation = float(np.maximum(0.0, -c).max(initial=0.0))
         if np.abs(p).max() <= tol and violation <= tol:
             return SolveResult(y, "optimal", iteration, c, B)
