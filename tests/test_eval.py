@@ -302,3 +302,25 @@ def test_value_model_snapshots_freeze_a_training_run(tmp_path: Path) -> None:
     assert copied.read_bytes() == b"weights-1"
     with pytest.raises(NehmoError, match="no weights file"):
         snapshot_value_models(parse_value_models([str(tmp_path / "none")]), tmp_path / "snap")
+
+
+def test_episode_title_reads_batch_and_ros_metadata() -> None:
+    from types import SimpleNamespace
+
+    from nehmo_core.eval.render import episode_title
+
+    cell = SimpleNamespace(name="dual_ur5")
+    batch = SimpleNamespace(
+        cell=cell,
+        metadata={"setup": "dual_ur5", "row": "nehmo", "scenario_set": {"seed": 0, "index": 7}},
+    )
+    assert episode_title(batch) == "dual_ur5 · nehmo · scenario seed 0 #7"  # type: ignore[arg-type]
+    ros = SimpleNamespace(
+        cell=cell,
+        metadata={
+            "source": "ros",
+            "scenario": {"file": "s.json", "episode": 0, "seed": 3, "index": 12},
+            "planners": {"ur5_0": "nehmo", "ur5_1": "naive"},
+        },
+    )
+    assert episode_title(ros) == "dual_ur5 (ROS) · nehmo/naive · scenario seed 3 #12"  # type: ignore[arg-type]

@@ -122,6 +122,20 @@ def distance_series(log: EpisodeLog, stride: int = 1) -> tuple[np.ndarray, dict[
     return (log.stamps[index] - log.stamps[0]) / 1e9, out
 
 
+def episode_title(log: EpisodeLog) -> str:
+    """``setup · planners · scenario seed/index`` from either log source.
+
+    The batch runner records ``setup``, ``row`` and ``scenario_set``; the ROS bridge records
+    ``scenario`` (file, episode, seed, index) and the planner kind per arm.
+    """
+    meta = log.metadata
+    source = meta.get("scenario_set") or meta.get("scenario") or {}
+    row = meta.get("row") or "/".join(str(k) for k in (meta.get("planners") or {}).values())
+    where = f"seed {source['seed']} #{source['index']}" if "index" in source else "unknown"
+    suffix = " (ROS)" if meta.get("source") == "ros" else ""
+    return f"{meta.get('setup', log.cell.name)}{suffix} · {row} · scenario {where}"
+
+
 def plot_distances(log: EpisodeLog, path: str | Path, stride: int = 1) -> Path:
     """A PNG of the minimum pairwise distance over time (every pair, and their minimum)."""
     import matplotlib
@@ -141,13 +155,7 @@ def plot_distances(log: EpisodeLog, path: str | Path, stride: int = 1) -> Path:
     ax.axvline(result.end_time, color="grey", lw=0.8, ls=":")
     ax.set_xlabel("time [s]")
     ax.set_ylabel("distance [m]")
-    meta = log.metadata
-    ax.set_title(
-        f"{meta.get('setup', log.cell.name)} · {meta.get('row', '')} · scenario "
-        f"{meta.get('scenario_set', {}).get('index', '?')} · {result.outcome} at "
-        f"{result.end_time:.2f} s",
-        fontsize=9,
-    )
+    ax.set_title(f"{episode_title(log)} · {result.outcome} at {result.end_time:.2f} s", fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
     ax.set_ylim(bottom=min(-0.02, float(overall.min()) - 0.02))
     fig.tight_layout()
