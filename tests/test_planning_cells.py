@@ -3,24 +3,37 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 import pytest
+from numpy.typing import ArrayLike
 
-from nehmo_core.errors import InvalidValueError, UnknownNameError
+from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
+from nehmo_core.eval.episode import EpisodeSettings, run_episode
+from nehmo_core.eval.planners import SHIPPED_PAIRS, ModelRegistry, build_planners
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr.networks import NetworkSettings
+from nehmo_core.hjr.train import shipped_value_path
 from nehmo_core.planning.baselines import NaivePlanner, TrajectoryTracker, retime
 from nehmo_core.planning.chomp import plan_chomp
 from nehmo_core.planning.factory import centralized_trackers, make_planner
+from nehmo_core.planning.interface import PlanResult, Telemetry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.pair_frame import base_yaw_joint, match_pair
+from nehmo_core.planning.pair_frame import (
+    base_yaw_joint,
+    inverse_pose,
+    match_pair,
+    pose_from_matrix,
+)
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.synthetic import random_value_function
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots import load_cell
+from nehmo_core.robots.loader import cell_from_dict
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
-from nehmo_core.sim.scenarios import sample_configuration, sample_scenario
+from nehmo_core.sim.cell_sim import CellSimulator
+from nehmo_core.sim.scenarios import sample_configuration, sample_scenario, scenario_rng
 
 UR5_PAIR = [("ur5", "ur5", load_cell("dual_ur5").arm("ur5_1").base)]
 
@@ -71,6 +84,63 @@ def test_mapped_pairs_have_the_same_exact_distance() -> None:
             assert max(errors) < 0.04 and np.mean(errors) < 0.006
 
 
+def test_poses_invert_and_round_trip_through_matrices() -> None:
+    rng = np.random.default_rng(0)
+    for pitch in [*rng.uniform(-3, 3, 20), math.pi / 2, -math.pi / 2]:
+        pose = Pose(tuple(rng.normal(size=3)), (rng.uniform(-3, 3), pitch, rng.uniform(-3, 3)))
+        np.testing.assert_allclose(
+            pose_from_matrix(pose.matrix()).matrix(), pose.matrix(), atol=1e-12
+        )
+        np.testing.assert_allclose(
+            inverse_pose(pose).matrix() @ pose.matrix(), np.eye(4), atol=1e-12
+        )
+
+
+def test_kinova_controlled_pairs_map_into_the_kinova_ur5_frame() -> None:
+    """The Kinova (first joint about −z) turned in its cell maps by shifts onto kinova_ur5."""
+    import torch
+
+    from nehmo_core.hjr.arm_pairs import make_arm_pair_system
+
+    frame = inverse_pose(load_cell("ur5_kinova").arm("kinova_0").base)  # the UR5 seen from it
+    model = [("kinova_gen3_6dof", "ur5", frame)]
+    yaw = 0.7  # the UR5's base yaw; the Kinova sits 0.6 m along the UR5's +y, turned by 0.9
+    c, s_ = math.cos(yaw), math.sin(yaw)
+    cell = cell_from_dict(
+        {
+            "name": "turned",
+            "arms": [
+                {"id": "u", "robot": "ur5", "base": {"xyz": [0.3, -0.1, 0], "rpy": [0, 0, yaw]}},
+                {
+                    "id": "k",
+                    "robot": "kinova_gen3_6dof",
+                    "base": {
+                        "xyz": [0.3 - 0.6 * s_, -0.1 + 0.6 * c, 0],
+                        "rpy": [0, 0, yaw - math.pi / 2 + 0.9],
+                    },
+                },
+            ],
+        }
+    )
+    m = match_pair(cell.arm("k"), cell.arm("u"), model)
+    assert m is not None and m.model_index == 0
+    assert math.isclose(float(np.cos(m.own_shift[0] + 0.9)), 1.0, abs_tol=1e-9)  # s = −1
+    assert math.isclose(float(np.cos(m.peer_shift[0] + math.pi / 2)), 1.0, abs_tol=1e-9)
+    system = make_arm_pair_system("kinova_ur5")
+    rng = np.random.default_rng(0)
+    errors = []
+    with CellWorld(cell) as world:
+        for _ in range(300):
+            qk, qu = rng.uniform(-2.2, 2.2, 6), rng.uniform(-np.pi, np.pi, 6)
+            world.set_configuration({"k": qk, "u": qu})
+            d = world.distance("k", "u", 1.0)
+            if d < 0.1:
+                x = torch.tensor(m.state(qk, qu)[None], dtype=torch.float32)
+                with torch.no_grad():
+                    errors.append(abs(float(system.boundary(x)) - d))
+    assert len(errors) > 20 and np.mean(errors) < 0.025  # as for the untouched cell
+
+
 def test_unmodelled_and_far_peers_are_reported() -> None:
     five = load_cell("five_ur5")
     vf = random_value_function("ur5_ur5", "bc", NetworkSettings(width=16, hidden_layers=1))
@@ -91,6 +161,77 @@ def test_unmodelled_and_far_peers_are_reported() -> None:
     result = lone.plan(np.zeros(6), {"ur5_9": np.zeros(6)}, np.full(6, 0.01))
     assert result.telemetry.status == "unconstrained"
     np.testing.assert_allclose(result.velocity, 0.1)
+
+
+class _Telemetry:
+    """Wraps a planner and keeps every plan's telemetry."""
+
+    def __init__(self, planner: NehmoPlanner) -> None:
+        self.planner = planner
+        self.arm_id = planner.arm_id
+        self.seen: list[Telemetry] = []
+
+    def reset(self) -> None:
+        self.planner.reset()
+
+    def plan(
+        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
+    ) -> PlanResult:
+        result = self.planner.plan(q_self, peers, q_goal)
+        self.seen.append(result.telemetry)
+        return result
+
+
+@pytest.mark.skipif(
+    not all(shipped_value_path(p).exists() for p in ("ur5_kinova", "kinova_ur5")),
+    reason="UR5-Kinova value functions not shipped",
+)
+def test_nehmo_on_both_arms_of_the_ur5_kinova_cell() -> None:
+    """Table IV's NeHMO/NeHMO row: each arm plans with its own game (kinova_ur5 for the Kinova)."""
+    cell = load_cell("ur5_kinova")
+    settings = EpisodeSettings(time_limit=20.0)
+    kinds = {"ur5_0": "nehmo", "kinova_0": "nehmo"}
+    with CellSimulator(cell, settings.substeps) as sim:
+        # scenario 0 of the challenging set (seed 0): the naive planners collide
+        scenario = sample_scenario(cell, scenario_rng(0, 0), sim.world)
+        naive = {a: NaivePlanner(cell, a) for a in cell.arm_ids}
+        assert run_episode(cell, scenario, naive, settings, simulator=sim).outcome == "collision"
+        planners = build_planners(cell, kinds, scenario, 1 / settings.rate, ModelRegistry())
+        kinova, ur5 = planners["kinova_0"], planners["ur5_0"]
+        assert isinstance(kinova, NehmoPlanner) and isinstance(ur5, NehmoPlanner)
+        own_model = kinova.models[kinova.pairs["ur5_0"].model_index]
+        assert own_model.name == "nehmo_kinova_ur5_bc_sym" and own_model.robot1 == kinova.robot.name
+        assert "ur5_kinova" in ur5.models[ur5.pairs["kinova_0"].model_index].name
+        watched = {"ur5_0": _Telemetry(ur5), "kinova_0": _Telemetry(kinova)}
+        result = run_episode(cell, scenario, watched, settings, kinds=kinds, simulator=sim)
+    assert result.outcome != "collision" and not result.collisions
+    seen = watched["kinova_0"].seen
+    assert seen and all(t.critical_peer == "ur5_0" for t in seen)
+    values = np.array([t.min_value for t in seen])
+    assert np.all(np.isfinite(values))
+    # the first plan saw the start state through kinova_ur5: V(t_plan, (q_kinova, q_ur5))
+    x0 = np.concatenate([scenario.start["kinova_0"], scenario.start["ur5_0"]])
+    v0, _ = own_model.evaluate(kinova.settings.t_plan, x0[None, :])
+    assert values[0] == pytest.approx(float(v0[0]), abs=1e-9)
+    assert values.min() > 0.0  # it kept a positive margin on the way
+
+
+def test_missing_pair_models_are_named() -> None:
+    two_kinovas = cell_from_dict(
+        {
+            "name": "two_kinovas",
+            "arms": [
+                {"id": "k0", "robot": "kinova_gen3_6dof"},
+                {"id": "k1", "robot": "kinova_gen3_6dof", "base": {"xyz": [0.6, 0, 0]}},
+            ],
+        }
+    )
+    scenario = sample_scenario(two_kinovas, scenario_rng(0, 0))
+    assert ("kinova_gen3_6dof", "ur5") in SHIPPED_PAIRS
+    kinds = {"k0": "nehmo", "k1": "naive"}
+    with pytest.raises(NehmoError, match=r"'k0'.*\('kinova_gen3_6dof', 'kinova_gen3_6dof'\)") as e:
+        build_planners(two_kinovas, kinds, scenario, 0.04, ModelRegistry())
+    assert "kinova_ur5" in str(e.value) and "ur5_kinova" in str(e.value)
 
 
 def test_naive_and_reckless_go_straight_and_clamp() -> None:

@@ -6,14 +6,19 @@ import numpy as np
 import pytest
 import torch
 
-from nehmo_core.errors import UnknownNameError
+from nehmo_core.errors import NehmoError, UnknownNameError
 from nehmo_core.geometry.distance_casadi import distance_function
+from nehmo_core.geometry.symmetry import robot_mirror_map
+from nehmo_core.hjr.arm_pairs import SwappedBoundary
 from nehmo_core.hjr.casadi_export import value_functions
-from nehmo_core.hjr.networks import NetworkSettings
+from nehmo_core.hjr.networks import NetworkSettings, ValueFunction, ValueNetwork
+from nehmo_core.hjr.systems import ArmPairSystem, JointInterval
+from nehmo_core.hjr.train import load_value_function, shipped_value_path
 from nehmo_core.planning import codegen
 from nehmo_core.planning.codegen import compile_function
 from nehmo_core.planning.synthetic import proxy_distance_model, random_value_function
 from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.robots.model import Pose
 
 SMALL = NetworkSettings(width=32, hidden_layers=2)
 
@@ -60,6 +65,84 @@ def test_value_export_matches_torch(pair: str, variant: str, scaling: str, backe
         grads = np.array([np.asarray(o[1]).ravel() for o in out])
         np.testing.assert_allclose(grads, ref_g, atol=1e-9, rtol=0)
         np.testing.assert_allclose([float(value(tau, xi)) for xi in x[:5]], ref_v[:5], atol=1e-9)
+
+
+@pytest.mark.skipif(
+    not shipped_value_path("kinova_ur5").exists(), reason="kinova_ur5 weights not shipped"
+)
+@pytest.mark.parametrize("backend", ["vm", "compiled"])
+def test_swapped_boundary_export_matches_torch(backend: str) -> None:
+    """kinova_ur5's l(x) is the ur5_kinova distance with the joint vectors swapped."""
+    vf = load_value_function("kinova_ur5", variant="bc+sym")
+    assert isinstance(vf.system, ArmPairSystem)
+    boundary = vf.system.boundary_fn
+    assert isinstance(boundary, SwappedBoundary)
+    vf.network.double()  # the float32 distance alone differs from float64 by up to ~1e-2 m
+    boundary.double()
+    _, value_grad = value_functions(vf, "test_kinova_ur5_bcsym")
+    fn = compile_function(value_grad, backend).function
+    x = _states(12, 40, 6)  # both halves of X (folded or not)
+    for tau in (0.0, 0.3, 0.6):
+        ref_v, ref_g = vf.value_and_gradient(tau, x)
+        out = [fn(tau, xi) for xi in x]
+        np.testing.assert_allclose([float(o[0]) for o in out], ref_v, atol=1e-8, rtol=0)
+        grads = np.array([np.asarray(o[1]).ravel() for o in out])
+        np.testing.assert_allclose(grads, ref_g, atol=1e-8, rtol=0)
+
+
+def _swapped_value_function(variant: str) -> ValueFunction:
+    """A random kinova_ur5-like game on a perturbed proxy of the ur5_kinova distance."""
+    distance = proxy_distance_model("ur5_kinova").double()
+    with torch.no_grad():
+        for p in distance.mlp.parameters():
+            p.add_(0.05 * torch.randn(p.shape, generator=torch.Generator().manual_seed(7)))
+    mirror = robot_mirror_map("kinova_gen3_6dof") + robot_mirror_map("ur5")
+    system = ArmPairSystem(
+        boundary_fn=SwappedBoundary(distance, distance.n2),
+        n1=distance.n2,
+        n2=distance.n1,
+        symmetry_sign=np.array(mirror.sign),
+        symmetry_offset=np.array(mirror.offset),
+        train_region=JointInterval(joint=6, low=-np.pi / 2, high=np.pi / 2),
+        system_name="kinova_ur5",
+    )
+    generator = torch.Generator().manual_seed(2)
+    network = ValueNetwork(system, variant, SMALL, generator)
+    return ValueFunction(network.double())
+
+
+@pytest.mark.parametrize("variant", ["bc", "bc+sym", "exact"])
+def test_swapped_value_model_matches_torch_and_has_the_swapped_geometry(variant: str) -> None:
+    vf = _swapped_value_function(variant)
+    model = PairValueModel.from_value_function(vf, "test_swapped", backend="vm")
+    assert (model.robot1, model.robot2, model.n1, model.n2) == ("kinova_gen3_6dof", "ur5", 6, 6)
+    # the UR5 seen from the Kinova: 0.6 m ahead, facing it (the inverse of ur5_kinova's base2)
+    np.testing.assert_allclose(
+        model.base2.matrix(), np.linalg.inv(Pose((0.6, 0, 0), (0, 0, np.pi)).matrix()), atol=1e-12
+    )
+    x = _states(12, 30, 7)
+    v, g = model.evaluate(0.25, x)
+    ref_v, ref_g = vf.value_and_gradient(0.25, x)
+    np.testing.assert_allclose(v, ref_v, atol=1e-9, rtol=0)
+    np.testing.assert_allclose(g, ref_g, atol=1e-9, rtol=0)
+
+
+def test_export_names_a_boundary_it_cannot_export() -> None:
+    vf = random_value_function("ur5_ur5", "bc", SMALL)
+    system = vf.system
+    assert isinstance(system, ArmPairSystem)
+    odd = ArmPairSystem(
+        boundary_fn=SwappedBoundary(torch.nn.Identity(), 6),
+        n1=6,
+        n2=6,
+        symmetry_sign=system.symmetry_sign,
+        symmetry_offset=system.symmetry_offset,
+        train_region=system.train_region,
+        system_name="odd_pair",
+    )
+    network = ValueNetwork(odd, "bc", SMALL)
+    with pytest.raises(NehmoError, match=r"'odd_pair'.*SwappedBoundary around a Identity"):
+        PairValueModel.from_value_function(ValueFunction(network), "test_odd", backend="vm")
 
 
 def test_symmetric_export_is_invariant_under_the_mirror_map() -> None:

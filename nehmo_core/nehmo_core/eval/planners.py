@@ -2,13 +2,16 @@
 
 Value models come from *sources*, given on the command line as ``[KIND=]SOURCE``:
 
-* ``SOURCE`` is a shipped pair name (``ur5_ur5``, ``ur5_kinova``: the variant is the row's,
-  per :data:`~nehmo_core.eval.setups.OPT_KINDS`), a training run directory (its model, or its
-  latest checkpoint) or a ``.safetensors`` file, or ``synthetic``: random-weight stand-ins from
-  :mod:`nehmo_core.planning.synthetic` (for smoke runs only; their numbers mean nothing).
+* ``SOURCE`` is a shipped pair name (``ur5_ur5``, ``ur5_kinova``, ``kinova_ur5``: the variant
+  is the row's, per :data:`~nehmo_core.eval.setups.OPT_KINDS`), a training run directory (its
+  model, or its latest checkpoint) or a ``.safetensors`` file, or ``synthetic``: random-weight
+  stand-ins from :mod:`nehmo_core.planning.synthetic` (for smoke runs only; their numbers mean
+  nothing).
 * ``KIND=`` limits a source to one planner kind (``nehmo_no_sym=runs/ur5_ur5_bc``); a source
   without it serves every Opt kind whose variant it matches.
-* Without a source for a kind, the shipped models of the cell's robot pairs are used.
+* Without a source for a kind, the shipped models of the cell's robot pairs are used
+  (:data:`SHIPPED_PAIRS`): in the UR5-Kinova cell, ``ur5_kinova`` for the UR5 and
+  ``kinova_ur5`` (the Kinova-controls game) for the Kinova.
 
 A row fails to build, naming the missing pair, when an Opt planner has a peer in reach that no
 model covers: such a peer would not be constrained at all.
@@ -17,7 +20,6 @@ model covers: such a peer would not be constrained at all.
 from __future__ import annotations
 
 import hashlib
-import math
 import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -25,19 +27,20 @@ from pathlib import Path
 from typing import Any
 
 import casadi as ca
-import numpy as np
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError
 from nehmo_core.eval.setups import OPT_KINDS, is_centralized
 from nehmo_core.planning.factory import centralized_trackers, make_planner
 from nehmo_core.planning.interface import Planner
 from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.pair_frame import inverse_pose
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.value_model import PairValueModel
-from nehmo_core.robots.model import Cell, Pose
+from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import Scenario
 
 __all__ = [
+    "SHIPPED_PAIRS",
     "SYNTHETIC",
     "ModelRegistry",
     "ValueModelSource",
@@ -49,7 +52,10 @@ __all__ = [
 ]
 
 SYNTHETIC = "synthetic"
-_SHIPPED_PAIRS = {("ur5", "ur5"): "ur5_ur5", ("ur5", "kinova_gen3_6dof"): "ur5_kinova"}
+_SYNTHETIC_PAIRS = {("ur5", "ur5"): "ur5_ur5", ("ur5", "kinova_gen3_6dof"): "ur5_kinova"}
+"""(controlled robot, other robot) → pair with a synthetic stand-in (a learned-distance cell)."""
+SHIPPED_PAIRS = {**_SYNTHETIC_PAIRS, ("kinova_gen3_6dof", "ur5"): "kinova_ur5"}
+"""(controlled robot, other robot) → the shipped value function of that game."""
 
 
 @dataclass(frozen=True)
@@ -129,20 +135,13 @@ def robot_pairs(cell: Cell) -> list[tuple[str, str]]:
     return pairs
 
 
-def _inverse_yaw_pose(pose: Pose) -> Pose:
-    T = np.linalg.inv(pose.matrix())
-    if abs(T[2, 2] - 1.0) > 1e-9:
-        raise NehmoError(f"cannot swap a pair model whose base is not a pure yaw: {pose}")
-    yaw = math.atan2(T[1, 0], T[0, 0])
-    return Pose((float(T[0, 3]), float(T[1, 3]), float(T[2, 3])), (0.0, 0.0, yaw))
-
-
 def swapped_pair_model(model: PairValueModel, name: str) -> PairValueModel:
     """``model`` seen from its second robot: ``V'(τ, q², q¹) = V(τ, q¹, q²)``.
 
     The roles of the players are swapped too (the controlled arm becomes the disturbance), so
     this is NOT the value function of the swapped game. It serves synthetic stand-ins, whose
-    ``V`` is the symmetric distance plus a small residual.
+    ``V`` is the symmetric distance plus a small residual; trained models of the swapped game
+    are separate (``kinova_ur5``).
     """
     n1, n2 = model.n1, model.n2
     tau = ca.MX.sym("tau")
@@ -155,7 +154,7 @@ def swapped_pair_model(model: PairValueModel, name: str) -> PairValueModel:
         name=name,
         robot1=model.robot2,
         robot2=model.robot1,
-        base2=_inverse_yaw_pose(model.base2),
+        base2=inverse_pose(model.base2),
         n1=n2,
         n2=n1,
         horizon=model.horizon,
@@ -185,7 +184,7 @@ class ModelRegistry:
         general = [s.source for s in self.sources if s.kind is None]
         if general:
             return general
-        return [_SHIPPED_PAIRS[p] for p in robot_pairs(cell) if p in _SHIPPED_PAIRS]
+        return [SHIPPED_PAIRS[p] for p in robot_pairs(cell) if p in SHIPPED_PAIRS]
 
     def models_for(self, kind: str, cell: Cell) -> list[PairValueModel]:
         """Every pair model the ``kind`` planners of ``cell`` use."""
@@ -240,8 +239,8 @@ class ModelRegistry:
         slug = variant.replace("+", "_")
         made: dict[tuple[str, str], PairValueModel] = {}
         for pair in pairs:
-            forward = _SHIPPED_PAIRS.get(pair)
-            backward = _SHIPPED_PAIRS.get((pair[1], pair[0]))
+            forward = _SYNTHETIC_PAIRS.get(pair)
+            backward = _SYNTHETIC_PAIRS.get((pair[1], pair[0]))
             if forward is not None:
                 vf = random_value_function(forward, variant)
                 made[pair] = PairValueModel.from_value_function(
@@ -272,6 +271,27 @@ def _kind_for(variant: str) -> str:
     return next((k for k, v in OPT_KINDS.items() if v == variant), "KIND")
 
 
+def _missing_models(
+    cell: Cell,
+    arm_id: str,
+    kind: str,
+    peers: Sequence[str],
+    models: Sequence[PairValueModel],
+    registry: ModelRegistry,
+) -> NehmoError:
+    """The error for an Opt planner whose peers ``peers`` no loaded pair model covers."""
+    own = cell.arm(arm_id).robot.name
+    need = sorted({(own, cell.arm(p).robot.name) for p in peers})
+    loaded = [f"{m.name} ({m.robot1}, {m.robot2})" for m in models]
+    shipped = [f"{name} {pair}" for pair, name in SHIPPED_PAIRS.items()]
+    return NehmoError(
+        f"arm {arm_id!r} ({kind}) has peers {list(peers)} that no value model covers; "
+        f"it needs pair models {need} (robot1 = the planning arm). Sources used: "
+        f"{registry.sources_for(kind, cell)}; models loaded: {loaded or 'none'}; shipped pair "
+        f"models: {', '.join(shipped)}"
+    )
+
+
 def build_planners(
     cell: Cell,
     kinds: Mapping[str, str],
@@ -298,20 +318,13 @@ def build_planners(
         return dict(cache)
     out: dict[str, Planner] = {}
     for arm_id, kind in kinds.items():
-        models = registry.models_for(kind, cell) if kind in OPT_KINDS else ()
+        models = registry.models_for(kind, cell) if kind in OPT_KINDS else []
+        if kind in OPT_KINDS and not models:
+            peers = tuple(a for a in cell.arm_ids if a != arm_id)
+            raise _missing_models(cell, arm_id, kind, peers, models, registry)
         planner = make_planner(kind, cell, arm_id, models, settings)
         if isinstance(planner, NehmoPlanner) and planner.peers_unmodelled and not allow_unmodelled:
-            need = sorted(
-                {
-                    (cell.arm(arm_id).robot.name, cell.arm(p).robot.name)
-                    for p in planner.peers_unmodelled
-                }
-            )
-            raise NehmoError(
-                f"arm {arm_id!r} ({kind}) has peers {list(planner.peers_unmodelled)} in reach "
-                f"that no value model covers; it needs pair models {need} (robot1 = the "
-                f"planning arm). Sources used: {registry.sources_for(kind, cell)}"
-            )
+            raise _missing_models(cell, arm_id, kind, planner.peers_unmodelled, models, registry)
         out[arm_id] = planner
     if cache is not None:
         cache.clear()

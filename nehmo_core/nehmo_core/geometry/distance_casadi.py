@@ -7,6 +7,8 @@ the keypoints (link-frame origins and points between them), their pairwise dista
 minima, then the SiLU MLP with the model's feature normalization and output offset. Weights
 become constants of the graph, so a generated C function carries them. Everything is float64;
 the graph equals the torch model up to rounding (the tests check 1e-9).
+:func:`swapped_distance_value_and_gradient` feeds the model the two arms' joint vectors in the
+other order (the boundary of a game whose controlled arm is the model's second arm).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import casadi as ca
 import numpy as np
 from torch import nn
 
-from nehmo_core.errors import NehmoError
+from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.geometry.distance_model import PairDistanceModel
 from nehmo_core.geometry.kinematics import ArmKinematics
 
@@ -28,6 +30,7 @@ __all__ = [
     "features_expression",
     "keypoints_expression",
     "mlp_value_and_gradient",
+    "swapped_distance_value_and_gradient",
 ]
 
 _DIST_EPS = 1e-12  # the model's clamp on squared distances [m²]
@@ -152,6 +155,24 @@ def distance_value_and_gradient(model: PairDistanceModel, q: ca.MX) -> tuple[ca.
     """
     value, grad = distance_function(model)(q)
     return value, grad
+
+
+def swapped_distance_value_and_gradient(
+    model: PairDistanceModel, q: ca.MX, n_first: int
+) -> tuple[ca.MX, ca.MX]:
+    """``(l, ∇_q l)`` of ``l(q) = d(q[n_first:], q[:n_first])`` with ``d`` = ``model``.
+
+    ``q`` (n1 + n2,) [rad] holds the model's second arm first (``n_first`` = its joint count),
+    as :class:`~nehmo_core.hjr.arm_pairs.SwappedBoundary` does in torch.
+    """
+    if n_first != model.n2:
+        raise InvalidValueError(
+            "n_first", f"must equal the joint count of the model's second arm ({model.n2})", n_first
+        )
+    if q.shape[0] != model.dof:
+        raise InvalidValueError("q", f"must have {model.dof} rows", q.shape[0])
+    value, grad = distance_value_and_gradient(model, ca.vertcat(q[n_first:], q[:n_first]))
+    return value, ca.vertcat(grad[model.n1 :], grad[: model.n1])
 
 
 def distance_expression(model: PairDistanceModel, q: ca.MX) -> ca.MX:

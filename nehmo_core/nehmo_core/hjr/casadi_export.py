@@ -2,7 +2,8 @@
 
 The graph reproduces :class:`~nehmo_core.hjr.networks.ValueFunction` for an
 :class:`~nehmo_core.hjr.systems.ArmPairSystem` whose boundary is a
-:class:`~nehmo_core.geometry.distance_model.PairDistanceModel`:
+:class:`~nehmo_core.geometry.distance_model.PairDistanceModel` or a
+:class:`~nehmo_core.hjr.arm_pairs.SwappedBoundary` around one (see :func:`pair_boundary`):
 
 1. periodic state coordinates are wrapped to ``(−π, π]`` (the planner's predicted states may
    cross ±π; the torch function expects states in the domain already, where this is the
@@ -25,12 +26,17 @@ import casadi as ca
 import numpy as np
 
 from nehmo_core.errors import NehmoError
-from nehmo_core.geometry.distance_casadi import distance_value_and_gradient
+from nehmo_core.geometry.distance_casadi import (
+    distance_value_and_gradient,
+    swapped_distance_value_and_gradient,
+)
 from nehmo_core.geometry.distance_model import PairDistanceModel
+from nehmo_core.hjr.arm_pairs import SwappedBoundary
 from nehmo_core.hjr.networks import Siren, ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import ArmPairSystem
 
 __all__ = [
+    "pair_boundary",
     "siren_expression",
     "siren_value_and_gradient",
     "value_and_gradient_expression",
@@ -108,14 +114,47 @@ def _network_input(network: ValueNetwork, tau: ca.MX, x: ca.MX) -> tuple[ca.MX, 
     return ca.vertcat(tau_hat, (x - center) / half), 1.0 / half
 
 
-def _boundary_model(system: ArmPairSystem) -> PairDistanceModel:
+def pair_boundary(system: object) -> tuple[PairDistanceModel, int | None]:
+    """``(distance, n_first)``: the learned distance behind an arm-pair system's ``l(x)``.
+
+    ``n_first`` is None when ``l = distance``, and the controlled arm's joint count when ``l`` is
+    a :class:`~nehmo_core.hjr.arm_pairs.SwappedBoundary` (``l(x) = distance(x₂, x₁)``: the
+    distance's second arm is the system's first). Anything else raises :class:`NehmoError`.
+    """
+    name = getattr(system, "name", type(system).__name__)
+    if not isinstance(system, ArmPairSystem):
+        raise NehmoError(f"system {name!r} is not an arm-pair system; it has no pair distance")
     fn = system.boundary_fn
-    if not isinstance(fn, PairDistanceModel):
-        raise NehmoError(
-            f"cannot export the boundary of system {system.name!r}: it is a "
-            f"{type(fn).__name__}, not a PairDistanceModel"
-        )
-    return fn
+    if isinstance(fn, PairDistanceModel):
+        if (fn.n1, fn.n2) != (system.n1, system.n2):
+            raise NehmoError(
+                f"boundary of system {name!r} has arms of {fn.n1} and {fn.n2} joints, "
+                f"the system {system.n1} and {system.n2}"
+            )
+        return fn, None
+    if isinstance(fn, SwappedBoundary) and isinstance(fn.distance, PairDistanceModel):
+        inner = fn.distance
+        if not fn.n_first == inner.n2 == system.n1 or inner.n1 != system.n2:
+            raise NehmoError(
+                f"swapped boundary of system {name!r} (n_first={fn.n_first}) does not fit its "
+                f"distance (arms of {inner.n1} and {inner.n2} joints) and the system "
+                f"(n1={system.n1}, n2={system.n2})"
+            )
+        return inner, fn.n_first
+    inner_type = type(getattr(fn, "distance", None)).__name__
+    detail = f" around a {inner_type}" if isinstance(fn, SwappedBoundary) else ""
+    raise NehmoError(
+        f"cannot export the boundary of system {name!r}: it is a {type(fn).__name__}{detail}, "
+        "not a PairDistanceModel or a SwappedBoundary around one"
+    )
+
+
+def _boundary_value_and_gradient(system: ArmPairSystem, x: ca.MX) -> tuple[ca.MX, ca.MX]:
+    """``(l, ∇ₓl)`` of the system's boundary for the (wrapped, folded) state ``x``."""
+    distance, n_first = pair_boundary(system)
+    if n_first is None:
+        return distance_value_and_gradient(distance, x)
+    return swapped_distance_value_and_gradient(distance, x, n_first)
 
 
 def value_and_gradient_expression(
@@ -135,7 +174,7 @@ def value_and_gradient_expression(
     if network.variant == "deepreach":
         w, grad_w = nn_out, nn_grad_x
     else:
-        boundary, boundary_grad = distance_value_and_gradient(_boundary_model(system), xs)
+        boundary, boundary_grad = _boundary_value_and_gradient(system, xs)
         l_hat = (boundary - system.value_mean) * system.value_scale
         if network.variant == "exact":
             w, grad_w = l_hat + tau * nn_out, boundary_grad * system.value_scale + tau * nn_grad_x

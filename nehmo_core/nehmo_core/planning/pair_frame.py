@@ -10,6 +10,11 @@ through the base origin (UR5, Kinova Gen3), that is a shift of the first joint:
 ``q¹₁ → q¹₁ − s¹·φ``, ``q²₁ → q²₁ + s²·ψ`` (``s = ±1``: the joint axis along ±z). Distances,
 and so values, are unchanged by the rigid motion; gradients are unchanged by a shift. E.g. in
 the three- and five-UR5 cells the centre arm's shift is 0, π or ±π/2 (as in the paper).
+
+A model whose controlled arm is the *second* arm of a learned distance (``kinova_ur5``: the
+Kinova at the origin, the UR5 at ``(0.6, 0, 0)`` facing it) has ``M = T_2_1``, the inverse of
+the distance's base offset (:func:`inverse_pose`); in the UR5-Kinova cell both arms' pairs then
+map with zero shifts.
 """
 
 from __future__ import annotations
@@ -26,7 +31,15 @@ from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.robots.loader import load_robot
 from nehmo_core.robots.model import ArmSpec, Pose, RobotModel, wrap_angle
 
-__all__ = ["PairMapping", "arm_reach", "base_yaw_joint", "match_pair", "relative_pose"]
+__all__ = [
+    "PairMapping",
+    "arm_reach",
+    "base_yaw_joint",
+    "inverse_pose",
+    "match_pair",
+    "pose_from_matrix",
+    "relative_pose",
+]
 
 POSITION_TOL = 1e-6  # [m]
 ANGLE_TOL = 1e-6  # [rad]
@@ -48,6 +61,24 @@ class PairMapping:
 def relative_pose(own: Pose, peer: Pose) -> np.ndarray:
     """``T_own_peer = T_world_own⁻¹ · T_world_peer`` (4, 4)."""
     return np.linalg.inv(own.matrix()) @ peer.matrix()
+
+
+def pose_from_matrix(T: np.ndarray) -> Pose:
+    """The :class:`Pose` (xyz, fixed-axis rpy) of a homogeneous transform ``T`` (4, 4)."""
+    R = T[:3, :3]
+    cos_pitch = math.hypot(R[0, 0], R[1, 0])
+    pitch = math.atan2(-R[2, 0], cos_pitch)
+    if cos_pitch > 1e-9:
+        roll, yaw = math.atan2(R[2, 1], R[2, 2]), math.atan2(R[1, 0], R[0, 0])
+    else:  # gimbal lock: only roll ∓ yaw is defined; put it all in yaw
+        roll, yaw = 0.0, math.atan2(-R[0, 1], R[1, 1])
+    xyz = (float(T[0, 3]), float(T[1, 3]), float(T[2, 3]))
+    return Pose(xyz, (roll, pitch, yaw))
+
+
+def inverse_pose(pose: Pose) -> Pose:
+    """``T⁻¹`` of ``pose``: where the origin frame sits seen from ``pose``'s frame."""
+    return pose_from_matrix(np.linalg.inv(pose.matrix()))
 
 
 @functools.cache

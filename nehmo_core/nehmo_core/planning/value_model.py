@@ -16,10 +16,10 @@ import casadi as ca
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError, NehmoError
-from nehmo_core.geometry.distance_model import PairDistanceModel
-from nehmo_core.hjr.casadi_export import value_functions
+from nehmo_core.hjr.casadi_export import pair_boundary, value_functions
 from nehmo_core.hjr.networks import ValueFunction
 from nehmo_core.planning.codegen import compile_function
+from nehmo_core.planning.pair_frame import inverse_pose
 from nehmo_core.robots.model import Pose
 
 __all__ = ["PairValueModel"]
@@ -52,24 +52,35 @@ class PairValueModel:
     def from_value_function(
         cls, value_function: ValueFunction, name: str = "pair_value", backend: str = "auto"
     ) -> PairValueModel:
-        """Export ``value_function`` (an arm-pair system with a learned-distance boundary)."""
+        """Export ``value_function`` (an arm-pair system with a learned-distance boundary).
+
+        The pair geometry comes from the distance: as trained for a plain distance; with the
+        robots exchanged and the inverse base offset for a swapped one (``kinova_ur5``).
+        """
         system = value_function.system
-        boundary = getattr(system, "boundary_fn", None)
-        if not isinstance(boundary, PairDistanceModel):
+        try:
+            distance, n_first = pair_boundary(system)
+        except NehmoError as exc:
             raise NehmoError(
-                f"value function of system {system.name!r} has no PairDistanceModel boundary, "
-                "so its pair geometry (robots, base offset) is unknown"
-            )
+                f"value function {name!r}: {exc}, so its pair geometry (robots, base offset) "
+                "is unknown"
+            ) from None
+        cfg = distance.config
+        base2 = Pose(cfg.base2_xyz, cfg.base2_rpy)
+        if n_first is None:
+            robots, base, dofs = (cfg.robot1, cfg.robot2), base2, (distance.n1, distance.n2)
+        else:
+            robots, base = (cfg.robot2, cfg.robot1), inverse_pose(base2)
+            dofs = (distance.n2, distance.n1)
         value, value_grad = value_functions(value_function, name)
         compiled = compile_function(value_grad, backend)
-        cfg = boundary.config
         return cls(
             name=name,
-            robot1=cfg.robot1,
-            robot2=cfg.robot2,
-            base2=Pose(cfg.base2_xyz, cfg.base2_rpy),
-            n1=boundary.n1,
-            n2=boundary.n2,
+            robot1=robots[0],
+            robot2=robots[1],
+            base2=base,
+            n1=dofs[0],
+            n2=dofs[1],
             horizon=float(system.horizon),
             value=value,
             value_grad=compiled.function,
