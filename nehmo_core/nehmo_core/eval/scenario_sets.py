@@ -1,9 +1,11 @@
 """Scenario sets of the evaluation setups, generated once per seed and kept as JSON files.
 
-Scenario ``i`` of the set with seed ``s`` is drawn from ``default_rng([s, i])`` by the paper's
-protocol (:func:`nehmo_core.sim.scenarios.sample_scenario`). The UR5-Kinova challenging set keeps
-the first candidates in which the naive planner collides, run by the same episode runner and
-rules as the evaluation (so its Naive / Naive row collides in every episode by construction).
+Scenario ``i`` of the set with seed ``s`` is drawn by the paper's protocol from
+:func:`nehmo_core.sim.scenarios.scenario_rng` (seed 0: the authors' draws). The UR5-Kinova
+challenging set keeps, like the authors, the first candidates in which the naive planner on every
+arm ends in a collision *between the arms* (a naive self-collision does not qualify), run by the
+same episode runner and rules as the evaluation, so its Naive / Naive row collides in every
+episode by construction.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from nehmo_core.planning.baselines import NaivePlanner
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenarios import (
+    SAMPLING_REVISION,
     Scenario,
     ScenarioSet,
     generate_scenario_set,
@@ -31,12 +34,16 @@ __all__ = ["naive_collides", "scenario_set_for", "scenario_set_path"]
 def naive_collides(
     cell: Cell, settings: EpisodeSettings, sim: CellSimulator
 ) -> Callable[[Scenario], bool]:
-    """A filter: true when the naive planner on every arm collides within the time limit."""
+    """A filter: true when the naive planner on every arm ends in an inter-arm collision.
+
+    The authors' challenging set holds the naive planner's inter-arm collision trials; an episode
+    that ends in a self-collision alone is not one.
+    """
     planners = {a: NaivePlanner(cell, a) for a in cell.arm_ids}
 
     def accept(scenario: Scenario) -> bool:
         result = run_episode(cell, scenario, planners, settings, simulator=sim)
-        return result.outcome == "collision"
+        return result.outcome == "collision" and any(c.arm_a != c.arm_b for c in result.collisions)
 
     return accept
 
@@ -55,17 +62,22 @@ def scenario_set_for(
 ) -> ScenarioSet:
     """The first ``count`` scenarios of ``setup``'s set with ``seed``.
 
-    With ``directory``, a saved set with at least ``count`` scenarios is reused (a shorter one
-    is regenerated) and a new set is saved there.
+    With ``directory``, a saved set with at least ``count`` scenarios drawn by the current
+    sampling revision is reused (a shorter or older one is regenerated) and a new set is saved
+    there.
     """
     path = scenario_set_path(directory, setup, seed) if directory is not None else None
     if path is not None and path.exists():
         saved = load_scenario_set(path)
-        if saved.meta.get("setup") == setup.name and len(saved) >= count:
+        if (
+            saved.meta.get("setup") == setup.name
+            and saved.meta.get("sampling") == SAMPLING_REVISION
+            and len(saved) >= count
+        ):
             return saved.head(count)
     cell = setup.load_cell()
     settings = EpisodeSettings.for_setup(setup)
-    meta = {"setup": setup.name, "filter": setup.scenario_filter}
+    meta = {"setup": setup.name, "filter": setup.scenario_filter, "sampling": SAMPLING_REVISION}
     if setup.scenario_filter is None:
         made = generate_scenario_set(cell, seed, count, None, max_candidates, meta, progress)
     elif setup.scenario_filter == "naive_collides":

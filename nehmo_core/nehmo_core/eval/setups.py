@@ -2,11 +2,11 @@
 
 A :class:`Setup` names a cell, its time limit, its success rule, the arms whose planning time
 is reported (the centre arm of the three- and five-UR5 cells, like the paper) and an optional
-scenario filter (the UR5-Kinova challenging set keeps scenarios where the naive planner
-collides). In the three- and five-UR5 cells the outer arms are 0.85 m or 1.2 m apart, a gap
-no trained pair model covers: like the authors, their planners constrain only the pairs with
-the centre arm, and the unconstrained peers are reported (telemetry, summaries). Collisions
-are checked among all pairs regardless.
+scenario filter (the UR5-Kinova challenging set keeps scenarios where the naive planners
+collide with each other). In the three- and five-UR5 cells the outer arms are 0.85 m or 1.2 m
+apart, a gap no trained pair model covers: like the authors, their planners constrain only the
+pairs with the centre arm, and the unconstrained peers are reported (telemetry, summaries).
+Collisions are checked among all pairs regardless.
 
 A *row* is one planner per arm, written ``nehmo`` (every arm) or ``nehmo/reckless`` (one kind
 per arm, in the cell's arm order).
@@ -94,7 +94,7 @@ SETUPS: dict[str, Setup] = {
             "ur5_kinova",
             20.0,
             scenario_filter="naive_collides",
-            description="UR5 + Kinova Gen3, scenarios where the naive planner collides (Table IV)",
+            description="UR5 + Kinova Gen3, scenarios where naive arms collide (Table IV)",
         ),
         Setup("ur5_kinova", "ur5_kinova", 20.0, description="UR5 + Kinova Gen3, random scenarios"),
     )

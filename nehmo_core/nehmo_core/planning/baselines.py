@@ -1,7 +1,10 @@
 """Simple baselines: the naive planner and the reckless mode, and trajectory tracking.
 
-* :class:`NaivePlanner` drives straight toward the goal, ``u = clip((q_goal − q)/t_plan, ±ū)``,
-  ignoring every other arm (paper § IV).
+* :class:`NaivePlanner` drives straight toward the goal, ``u = clip((q_goal − q)/t_plan, ±ū)``
+  per joint, ignoring every other arm (paper § IV). Like the authors' naive planner it does not
+  wrap continuous joints (``wrap_goal`` stays off): a UR5 base joint turns the long way between
+  start and goal, through the side facing the other arm, which is what makes the paper's
+  scenarios interact.
 * ``reckless``: the same law for one arm of a cell that the others must defend against (the
   paper's UR5-Kinova "NeHMO / Naive" experiment); only the telemetry status differs.
 * :class:`TrajectoryTracker` gives a centralized planner's (CHOMP, OMPL) joint trajectory of all
