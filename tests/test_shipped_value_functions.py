@@ -15,12 +15,13 @@ SHIPPED = [
     (name, variant)
     for name, variants in SHIPPED_VALUE_FUNCTIONS.items()
     for variant in variants
-    if shipped_value_path(name, variant).exists()
 ]
 
 
-def test_the_planners_model_is_shipped() -> None:
-    assert ("ur5_ur5", "bc+sym") in SHIPPED
+@pytest.mark.parametrize(("name", "variant"), SHIPPED)
+def test_every_listed_model_is_shipped(name: str, variant: str) -> None:
+    path = shipped_value_path(name, variant)
+    assert path.exists() and path.with_suffix(".json").exists()
 
 
 def _states(vf, count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
