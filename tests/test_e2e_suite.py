@@ -1,12 +1,12 @@
 """The node suite end to end: bridge, two planners and the recorder as separate processes.
 
-One dual-UR5 episode (scenario 0 of seed 0: the naive planner collides 0.6 s in, so the arms
+One dual-UR5 episode (scenario 11 of seed 0: the naive planner collides 2.2 s in, so the arms
 must coordinate) runs through ``orchestrate`` over the embedded runtime on loopback, in this
-test run's own DDS domain, with the synthetic pair value models (the trained ones do not ship
-yet). Meanwhile an independent cyclonedds participant with its own ROS-named types reads the
+test run's own DDS domain, with the synthetic pair value models (fast to compile, and what
+this test checks is the suite, not the models). Meanwhile an independent cyclonedds participant with its own ROS-named types reads the
 bridge's joint states. Tolerance against the batch runner (same scenario, same models): the
-outcome is equal; the time to success within 1.5 s and the path length within 35 %, because the
-processes run asynchronously on a loaded 2-core machine (solves that overrun their deadline
+outcome is equal; the time to success within 1.5 s and the path length within the stated
+bounds, because the processes run asynchronously and may be starved of CPU (solves that overrun their deadline
 become fail-safe commands, which the lock-step batch run never sees).
 """
 
@@ -28,7 +28,7 @@ from nehmo_ros.orchestrate import EpisodeRun, SuiteSettings
 from nehmo_ros.orchestrate import run_episode as run_ros_episode
 
 CELL = load_cell("dual_ur5")
-SEED, INDEX = 0, 0
+SEED, INDEX = 0, 11
 
 
 @pytest.fixture(scope="module")
