@@ -324,3 +324,26 @@ def test_episode_title_reads_batch_and_ros_metadata() -> None:
         },
     )
     assert episode_title(ros) == "dual_ur5 (ROS) · nehmo/naive · scenario seed 3 #12"  # type: ignore[arg-type]
+
+
+def test_nehmo_wrap_kind_wraps_the_goal_and_uses_the_bc_sym_model() -> None:
+    from nehmo_core.eval.setups import OPT_KINDS
+    from nehmo_core.planning.factory import make_planner
+
+    cell = load_cell("dual_ur5")
+    model = PairValueModel.from_value_function(
+        random_value_function("ur5_ur5", "bc+sym", NetworkSettings(width=16, hidden_layers=1)),
+        "tiny",
+    )
+    plain = make_planner("nehmo", cell, "ur5_0", [model])
+    wrapped = make_planner("nehmo_wrap", cell, "ur5_0", [model])
+    assert isinstance(wrapped, NehmoPlanner) and isinstance(plain, NehmoPlanner)
+    assert wrapped.settings.wrap_goal and not plain.settings.wrap_goal
+    assert OPT_KINDS["nehmo_wrap"] == OPT_KINDS["nehmo"] == "bc+sym"
+    # a goal 2π − 0.2 away on the base joint: the wrapped cost turns the short way
+    q = np.zeros(6)
+    goal = q.copy()
+    goal[0] = np.pi - 0.1
+    q[0] = -np.pi + 0.1
+    far = {"ur5_1": np.array([3.0, -1.6, 1.5, -1.6, -1.5, 0.0])}
+    assert wrapped.plan(q, far, goal).velocity[0] < 0 < plain.plan(q, far, goal).velocity[0]

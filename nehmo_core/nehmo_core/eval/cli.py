@@ -34,7 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--planners",
         default="nehmo,naive",
         help="comma-separated rows; a row is a kind for every arm or kinds per arm joined by "
-        "'/' (e.g. nehmo/reckless). Kinds: nehmo, nehmo_no_sym, opt_deepreach, naive, "
+        "'/' (e.g. nehmo/reckless). Kinds: nehmo, nehmo_no_sym, opt_deepreach, nehmo_wrap, naive, "
         "reckless, chomp, ompl",
     )
     parser.add_argument("--episodes", type=int, default=100, help="scenarios per row")

@@ -33,7 +33,12 @@ __all__ = [
 ]
 
 PLANNER_KINDS = DECENTRALIZED + CENTRALIZED
-OPT_KINDS: dict[str, str] = {"nehmo": "bc+sym", "nehmo_no_sym": "bc", "opt_deepreach": "deepreach"}
+OPT_KINDS: dict[str, str] = {
+    "nehmo": "bc+sym",
+    "nehmo_no_sym": "bc",
+    "opt_deepreach": "deepreach",
+    "nehmo_wrap": "bc+sym",
+}
 """Planner kinds solving problem Opt, with the value-function variant each row uses."""
 SUCCESS_NORMS = ("l2", "max")
 SCENARIO_FILTERS = ("naive_collides",)

@@ -4,13 +4,15 @@
 ``nehmo``          Opt with the ``bc+sym`` value model (the paper's NeHMO)
 ``nehmo_no_sym``   Opt with the ``bc`` value model (NeHMO w/o Sym)
 ``opt_deepreach``  Opt with the ``deepreach`` value model (Opt + DeepReach)
+``nehmo_wrap``     NeHMO whose goal cost wraps continuous joints (the paper does not)
 ``naive``          straight to the goal, clamped (ignores everyone)
 ``reckless``       the naive law for one arm the others must defend against
 ``chomp``          centralized CHOMP, tracked per arm (:func:`centralized_trackers`)
 ``ompl``           centralized RRT-Connect, tracked per arm (:func:`centralized_trackers`)
 =================  =====================================================================
 
-The three Opt rows differ only in the pair value models passed in; which trained model backs
+The Opt rows differ only in the pair value models passed in (and ``nehmo_wrap`` in its goal
+cost); which trained model backs
 which row is the caller's choice (the model registry lives with the trained weights).
 """
 
@@ -32,7 +34,7 @@ from nehmo_core.robots.model import Cell
 
 __all__ = ["CENTRALIZED", "DECENTRALIZED", "centralized_trackers", "make_planner"]
 
-DECENTRALIZED = ("nehmo", "nehmo_no_sym", "opt_deepreach", "naive", "reckless")
+DECENTRALIZED = ("nehmo", "nehmo_no_sym", "opt_deepreach", "nehmo_wrap", "naive", "reckless")
 CENTRALIZED = ("chomp", "ompl")
 
 
@@ -44,9 +46,11 @@ def make_planner(
     settings: PlannerSettings | None = None,
 ) -> Planner:
     """A per-arm planner of kind ``kind`` (one of :data:`DECENTRALIZED`)."""
-    if kind in ("nehmo", "nehmo_no_sym", "opt_deepreach"):
+    if kind in ("nehmo", "nehmo_no_sym", "opt_deepreach", "nehmo_wrap"):
         if not models:
             raise InvalidValueError("models", f"must hold at least one pair model for {kind!r}", [])
+        if kind == "nehmo_wrap":
+            settings = (settings or PlannerSettings()).replace(wrap_goal=True)
         return NehmoPlanner(cell, arm_id, models, settings)
     if kind in ("naive", "reckless"):
         return NaivePlanner(cell, arm_id, settings, reckless=kind == "reckless")
