@@ -2,12 +2,13 @@
 
 One dual-UR5 episode (scenario 11 of seed 0: the naive planner collides 2.2 s in, so the arms
 must coordinate) runs through ``orchestrate`` over the embedded runtime on loopback, in this
-test run's own DDS domain, with the synthetic pair value models (fast to compile, and what
-this test checks is the suite, not the models). Meanwhile an independent cyclonedds participant with its own ROS-named types reads the
-bridge's joint states. Tolerance against the batch runner (same scenario, same models): the
-outcome is equal; the time to success within 1.5 s and the path length within the stated
-bounds, because the processes run asynchronously and may be starved of CPU (solves that overrun their deadline
-become fail-safe commands, which the lock-step batch run never sees).
+test run's own DDS domain, with the synthetic pair value models (fast to compile; what this
+test checks is the suite, not the models). Meanwhile an independent cyclonedds participant
+with its own ROS-named types reads the bridge's joint states. Tolerance against the batch
+runner (same scenario, same models): the outcome is equal; the time to success within 1.5 s
+and the path length within the stated bounds, because the processes run asynchronously and
+may be starved of CPU (solves that overrun their deadline become fail-safe commands, which
+the lock-step batch run never sees).
 """
 
 from __future__ import annotations

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import hj_reachability  # noqa: F401  (a dependency: fail, never skip, when it is missing)
 import numpy as np
 import pytest
 import torch
-
-pytest.importorskip("hj_reachability")
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.hjr.ground_truth import GroundTruth, cache_dir, ground_truth, validate

@@ -257,17 +257,23 @@ def test_factory_rejects_unknown_and_centralized_kinds() -> None:
 
 
 def test_tracker_follows_a_retimed_trajectory_within_the_speed_bound() -> None:
+    # the episode runner's latency: the command planned at tick k acts during tick k + 1
     cell = load_cell("dual_ur5")
-    path = {"ur5_0": np.array([[0.0] * 6, [1.0] * 6]), "ur5_1": np.zeros((2, 6))}
+    bend = np.array([1.0, 0.5, 0.25, -1.0, 0.0, 0.3])
+    path = {"ur5_0": np.array([[0.0] * 6, bend, bend * 0.5]), "ur5_1": np.zeros((3, 6))}
     trajectory = retime(path, 0.5)
-    assert trajectory.times[-1] == pytest.approx(2.0)
+    assert trajectory.times[-1] == pytest.approx(3.0)
     tracker = TrajectoryTracker(cell, trajectory, "ur5_0", period=0.1)
-    q = np.zeros(6)
-    for _ in range(25):
-        u = tracker.plan(q, {}, np.ones(6)).velocity
+    q, acting = np.zeros(6), np.zeros(6)
+    for k in range(40):
+        # on the shared clock one tick late: every joint where the trajectory was a tick ago
+        np.testing.assert_allclose(
+            q, trajectory.sample("ur5_0", max(0.0, 0.1 * (k - 1))), atol=1e-9
+        )
+        u = tracker.plan(q, {}, bend * 0.5).velocity
         assert np.all(np.abs(u) <= 0.5 + 1e-12)
-        q = q + 0.1 * u
-    np.testing.assert_allclose(q, 1.0, atol=1e-9)
+        q, acting = q + 0.1 * acting, u
+    np.testing.assert_allclose(q, bend * 0.5, atol=1e-9)
 
 
 def test_chomp_plans_all_arms_and_checks_the_result_exactly() -> None:
@@ -284,7 +290,6 @@ def test_chomp_plans_all_arms_and_checks_the_result_exactly() -> None:
 
 
 def test_ompl_rrt_connect_finds_a_collision_free_path() -> None:
-    pytest.importorskip("ompl")
     from nehmo_core.planning.ompl_planner import OmplSettings
 
     cell = load_cell("dual_ur5")
@@ -294,10 +299,12 @@ def test_ompl_rrt_connect_finds_a_collision_free_path() -> None:
     )
     assert summary["success"]
     q = dict(scenario.start)
+    acting = {a: np.zeros(6) for a in cell.arm_ids}  # one tick of latency, as in episodes
     with CellWorld(cell) as world:
         for _ in range(1500):
             cmd = {a: trackers[a].plan(q[a], q, scenario.goal[a]).velocity for a in cell.arm_ids}
-            q = {a: q[a] + 0.04 * cmd[a] for a in cell.arm_ids}
+            q = {a: q[a] + 0.04 * acting[a] for a in cell.arm_ids}
+            acting = cmd
             world.set_configuration(q)
             assert not world.in_collision(self_collision=False)
     for a in cell.arm_ids:

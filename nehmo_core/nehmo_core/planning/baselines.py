@@ -107,18 +107,25 @@ class TrajectoryTracker:
         self.settings = settings or PlannerSettings()
         self.plan_time = plan_time  # the centralized solve, reported on the first call
         self._t = 0.0
+        self._last = np.zeros(self.robot.dof)
 
     def reset(self) -> None:
         self._t = 0.0
+        self._last = np.zeros(self.robot.dof)
 
     def plan(
         self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
     ) -> PlanResult:
         start = time.perf_counter()
         q = self.robot.check_q(q_self, "q_self")
+        # One tick of latency: this command acts during the next tick, while the previous one
+        # acts now. Aim from where the previous command takes the arm, so that every joint stays
+        # on the shared clock (a lagging joint would bend the path the planner checked).
+        predicted = q + self.period * self._last
         target = self.trajectory.sample(self.arm_id, self._t + self.period)
-        error = goal_error(q, target, self.robot, wrap=True)  # OMPL wraps continuous joints
+        error = goal_error(predicted, target, self.robot, wrap=True)
         u = np.clip(-error / self.period, -self.settings.u_max, self.settings.u_max)
+        self._last = u
         elapsed = time.perf_counter() - start + (self.plan_time if self._t == 0.0 else 0.0)
         self._t += self.period
         return PlanResult(u, Telemetry(elapsed, "tracking"))

@@ -20,7 +20,6 @@ from typing import Any
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError, NehmoError
-from nehmo_core.geometry.distance_data import sampling_box
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.robots.model import Cell
 
@@ -73,10 +72,9 @@ def plan_rrt_connect(
     if s.seed is not None:
         ou.RNG.setSeed(s.seed)
     lows, highs, sizes = [], [], []
-    for arm in cell.arms:
-        lo, hi = sampling_box(arm.robot)
-        lows.append(lo)
-        highs.append(hi)
+    for arm in cell.arms:  # the joint limits (continuous joints: one turn either way)
+        lows.append(np.maximum(arm.robot.lower, -2.0 * np.pi))
+        highs.append(np.minimum(arm.robot.upper, 2.0 * np.pi))
         sizes.append(arm.robot.dof)
     low, high = np.concatenate(lows), np.concatenate(highs)
     n = len(low)
@@ -107,13 +105,18 @@ def plan_rrt_connect(
         si = ss.getSpaceInformation()
         si.setStateValidityCheckingResolution(s.check_step / space.getMaximumExtent())
         endpoints = []
-        for values in (start, goal):
-            q = np.concatenate(
-                [cell.arms[i].robot.wrap(values[a.arm_id]) for i, a in enumerate(cell.arms)]
-            )
+        for name, values in (("start", start), ("goal", goal)):
+            # as given, not wrapped: the path must begin where the arms are and end where the
+            # other planners' goals are (each tracker follows it joint by joint)
+            q = np.concatenate([np.asarray(values[a.arm_id], dtype=float) for a in cell.arms])
+            outside = np.flatnonzero((q < low) | (q > high))
+            if len(outside):
+                raise InvalidValueError(
+                    name, f"joints {outside.tolist()} must lie in the planning bounds", q.tolist()
+                )
             state = space.allocState()
             for i in range(n):
-                state[i] = float(np.clip(q[i], low[i], high[i]))
+                state[i] = float(q[i])
             endpoints.append(state)
         ss.setStartAndGoalStates(endpoints[0], endpoints[1])
         planner = og.RRTConnect(si)
