@@ -17,7 +17,9 @@ from nehmo_ros.control import ArmController, ControlSettings
 
 CELL = load_cell("dual_ur5")
 NAMES = list(CELL.arm("ur5_0").robot.joint_names)
-SETTINGS = ControlSettings(rate=25.0, deadline=0.03, peer_timeout=0.25)
+# The tests tag observations with large steps of the own first joint: no jump test here (the
+# jump tests below turn it on).
+SETTINGS = ControlSettings(rate=25.0, deadline=0.03, peer_timeout=0.25, jump_margin=math.inf)
 FAIL_SAFE = np.full(6, 0.5)
 
 
@@ -235,3 +237,204 @@ def test_worker_never_blocks_the_tick() -> None:
         assert threading.active_count() >= 2
     finally:
         c.stop()
+
+
+# ----------------------------------------------------------------------- jumps, untrusted peers
+def _jump_controller(planner: RecordingPlanner, **changes: object) -> ArmController:
+    return _controller(planner, jump_margin=0.1, **changes)
+
+
+def _step(c: ArmController, now: float, peer_q: list[float], own_q0: float = 0.0) -> None:
+    c.states.update("ur5_0", NAMES, [own_q0, 0, 0, 0, 0, 0], now)
+    c.states.update("ur5_1", NAMES, peer_q, now)
+
+
+@pytest.mark.parametrize(
+    ("policy", "expected"), [("fail_safe", FAIL_SAFE), ("hold", np.zeros(6))], ids=["fs", "hold"]
+)
+def test_a_teleporting_peer_is_untrusted_for_peer_timeout(
+    policy: str, expected: np.ndarray
+) -> None:
+    planner = RecordingPlanner()
+    c = _jump_controller(planner, stale_policy=policy)
+    try:
+        _step(c, 0.0, [0.0] * 6)
+        c.tick(0.0)
+        _wait_idle(c)
+        note = c.states.update("ur5_1", NAMES, [0.8] + [0.0] * 5, 0.01)  # 0.8 rad in 10 ms
+        assert note is not None and note.startswith("jumped") and "shoulder_pan_joint" in note
+        assert c.states.jumps["ur5_1"] == 1
+        c.states.update("ur5_0", NAMES, [0.0] * 6, 0.04)
+        c.tick(0.04)
+        _wait_idle(c)
+        d = c.tick(0.08)
+        assert d.status == "untrusted_peer" and d.untrusted == ("ur5_1",)
+        np.testing.assert_array_equal(d.velocity, expected)
+        calls = len(planner.calls)
+        for k in range(3, 12):  # consistent states again: trusted once peer_timeout has passed
+            _step(c, 0.04 * k, [0.8] + [0.0] * 5)
+            d = c.tick(0.04 * k)
+            _wait_idle(c)
+        assert d.status == "optimal" and not d.untrusted
+        assert len(planner.calls) > calls
+    finally:
+        c.stop()
+
+
+def test_motion_within_the_speed_bound_is_no_jump() -> None:
+    c = _jump_controller(RecordingPlanner())
+    try:
+        q, now = np.full(6, np.pi - 0.2), 0.0
+        for _ in range(100):  # 0.5 rad/s on every joint at 100 Hz, published wrapped to ±π
+            q = (q + 0.005 + np.pi) % (2 * np.pi) - np.pi
+            now += 0.01
+            assert c.states.update("ur5_1", NAMES, list(q), now) is None
+        for _ in range(5):  # a burst of queued messages received together
+            q = q + 0.005
+            assert c.states.update("ur5_1", NAMES, list(q), now) is None
+        assert c.states.jumps["ur5_1"] == 0
+    finally:
+        c.stop()
+
+
+def test_a_large_header_stamp_interval_allows_a_large_step() -> None:
+    """Simulated time faster than wall time: the stamps tell how long the arm could move."""
+    c = _jump_controller(RecordingPlanner())
+    try:
+        c.states.update("ur5_1", NAMES, [0.0] * 6, 0.0, stamp_ns=1_000_000_000)
+        assert c.states.update("ur5_1", NAMES, [0.5] * 6, 0.01, stamp_ns=2_000_000_000) is None
+        assert c.states.update("ur5_1", NAMES, [1.0] * 6, 0.02, stamp_ns=2_010_000_000)
+    finally:
+        c.stop()
+
+
+def test_a_rejected_peer_state_untrusts_the_peer_at_once() -> None:
+    c = _jump_controller(RecordingPlanner())
+    try:
+        _step(c, 0.0, [0.0] * 6)
+        c.tick(0.0)
+        _wait_idle(c)
+        note = c.states.update("ur5_1", NAMES, [math.nan] * 6, 0.02)
+        assert note is not None and note.startswith("rejected")
+        c.states.update("ur5_0", NAMES, [0.0] * 6, 0.04)
+        c.tick(0.04)  # the peer's last valid state is 40 ms old: fresh, but untrusted
+        _wait_idle(c)
+        d = c.tick(0.08)
+        assert d.status == "untrusted_peer" and d.hold and not d.stale  # the default policy
+        assert not np.any(d.velocity)
+    finally:
+        c.stop()
+
+
+def test_a_jumping_own_state_holds_the_arm() -> None:
+    c = _jump_controller(RecordingPlanner())
+    try:
+        _step(c, 0.0, [0.0] * 6)
+        c.states.update("ur5_0", NAMES, [1.0] + [0.0] * 5, 0.02)
+        c.states.update("ur5_1", NAMES, [0.0] * 6, 0.02)
+        c.tick(0.02)
+        _wait_idle(c)
+        d = c.tick(0.06)
+        assert d.status == "own_state_untrusted" and d.hold and not np.any(d.velocity)
+    finally:
+        c.stop()
+
+
+def test_malformed_messages_are_rejected_not_raised() -> None:
+    c = _jump_controller(RecordingPlanner())
+    try:
+        assert (c.states.update("ur5_1", NAMES, ["x"] * 6, 0.0) or "").startswith("rejected")  # type: ignore[list-item]
+        assert (c.states.update("ur5_1", [1, 2], [0.0] * 2, 0.0) or "").startswith("rejected")  # type: ignore[list-item]
+        assert c.states.rejected["ur5_1"] == 2
+    finally:
+        c.stop()
+
+
+# ------------------------------------------------------------------- repeated solver faults
+def _run_ticks(c: ArmController, ticks: int, period: float = 0.04) -> list:
+    out = []
+    for k in range(ticks):
+        _feed(c, k * period, 0.0)
+        out.append(c.tick(k * period))
+        time.sleep(0.005)
+    return out
+
+
+def test_a_solver_that_always_raises_commands_the_fail_safe_and_counts() -> None:
+    from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
+
+    spec = parse_fault("raise@2")
+    assert spec is not None
+    c = _controller(FaultInjectingPlanner(RecordingPlanner(), spec))  # type: ignore[arg-type]
+    try:
+        decisions = _run_ticks(c, 12)
+        _wait_idle(c)
+        failed = [d for d in decisions if d.status == "failed"]
+        assert len(failed) >= 5 and all("injected" in d.error for d in failed)
+        for d in failed:
+            np.testing.assert_array_equal(d.velocity, FAIL_SAFE)
+        assert c.counters.solver_errors == len(failed)
+        assert decisions[1].status == "optimal"  # before the fault starts
+    finally:
+        c.stop()
+
+
+def test_a_slow_solver_misses_every_deadline_and_stays_on_the_fail_safe() -> None:
+    from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
+
+    spec = parse_fault("slow:0.06")
+    assert spec is not None
+    c = _controller(FaultInjectingPlanner(RecordingPlanner(), spec))  # type: ignore[arg-type]
+    try:
+        decisions = []
+        for k in range(10):  # real time: the solve (60 ms) outlasts the 40 ms tick
+            _feed(c, k * 0.04, 0.0)
+            decisions.append(c.tick(k * 0.04))
+            time.sleep(0.04)
+        assert c.counters.deadline_misses >= 4
+        for d in decisions[1:]:
+            assert d.fail_safe and np.all(np.abs(d.velocity) <= 0.5)
+    finally:
+        c.stop()
+
+
+@pytest.mark.parametrize(
+    ("text", "rule"),
+    [
+        ("explode", "KIND"),
+        ("slow", "finite delay"),
+        ("hang:-1", "SECONDS must be > 0"),
+        ("raise@x", "KIND"),
+    ],
+)
+def test_fault_injection_values_are_checked(text: str, rule: str) -> None:
+    from nehmo_ros.fault_injection import parse_fault
+
+    with pytest.raises(InvalidValueError, match=rule) as info:
+        parse_fault(text)
+    assert "`fault_injection`" in str(info.value)
+
+
+def test_fault_injection_is_off_by_default() -> None:
+    from nehmo_ros.arm_planner import DEFAULTS
+    from nehmo_ros.fault_injection import parse_fault
+
+    assert DEFAULTS["fault_injection"] == "" and parse_fault("") is None
+
+
+def test_solver_raise_ends_in_the_planners_own_fail_safe() -> None:
+    from nehmo_core.planning.settings import PlannerSettings
+    from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
+    from nehmo_ros.planners import build_planner
+
+    inner = build_planner("nehmo", CELL, "ur5_0", "synthetic", PlannerSettings(deadline=1.0))
+    spec = parse_fault("solver_raise@1")
+    assert spec is not None
+    planner = FaultInjectingPlanner(inner, spec)
+    q = {"ur5_0": np.array([0.0, -1.5, 1.5, 0, 0, 0]), "ur5_1": np.array([0.0, -1.5, 1.5, 0, 0, 0])}
+    goal = q["ur5_0"] + 0.3
+    first = planner.plan(q["ur5_0"], {"ur5_1": q["ur5_1"]}, goal)
+    assert not first.telemetry.status.startswith("failed")
+    second = planner.plan(q["ur5_0"], {"ur5_1": q["ur5_1"]}, goal)
+    assert second.telemetry.status == "failed (InjectedFault)" and second.telemetry.fail_safe
+    assert set(np.abs(second.velocity)) <= {0.0, 0.5}

@@ -19,12 +19,21 @@ the value): ``arm_id`` (required), ``cell`` (required: shipped name or YAML path
 (nehmo | nehmo_no_sym | opt_deepreach | naive | reckless), ``model`` (shipped | synthetic |
 path), ``rate`` [Hz], ``t_plan``, ``t_safe`` [s], ``epsilon`` [m], ``u_max``, ``d_max``
 [rad/s], ``solver`` (sqp | ipopt), ``deadline`` [s] (0: 75 % of the period), ``peer_timeout``
-[s], ``stale_policy`` (fail_safe | hold), ``allow_unmodelled`` (accept peers in reach that no
-pair model covers: they are then not constrained; default false: an error).
+[s], ``stale_policy`` (hold | fail_safe: what a stale or untrusted peer triggers),
+``jump_margin`` [rad] (slack of the test that flags joint states moving faster than ``d_max``;
+``.inf``: off), ``allow_unmodelled`` (accept peers in reach that no pair model covers: they are
+then not constrained; default false: an error), ``fault_injection`` (tests only, default ''
+= off: :mod:`nehmo_ros.fault_injection`).
+
+Faults are reported, never fatal: rejected or jumping joint states, stale peers, solver
+exceptions and missed deadlines each log a WARN line (at most one per cause every 2 s) and
+show in every status (level WARN for a fail-safe or hold, ERROR for a solver exception or no
+own state) with running counters.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 import time
@@ -38,6 +47,7 @@ from nehmo_core.logs.topics import command_topic, goal_topic, joint_states_topic
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_ros import ros
 from nehmo_ros.control import ArmController, ControlSettings, Decision
+from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
 from nehmo_ros.node_support import (
     declare_parameters,
     load_cell_parameter,
@@ -63,15 +73,22 @@ DEFAULTS: dict[str, Any] = {
     "solver": "sqp",
     "deadline": 0.0,
     "peer_timeout": 0.25,
-    "stale_policy": "fail_safe",
+    "stale_policy": "hold",
+    "jump_margin": 0.1,
     "allow_unmodelled": False,
+    "fault_injection": "",
 }
+#: Seconds between two WARN lines of one cause.
+WARN_EVERY = 2.0
+#: History of the command and status publishers (reliable, keep last): 2 s at 25 Hz, so a
+#: recorder that stalls for up to 2 s on a loaded machine loses nothing.
+HISTORY = 50
 
 
 def _level(decision: Decision) -> bytes:
     if decision.error or decision.status in ("no_own_state", "non_finite_command"):
         return ros.msg.DiagnosticStatus.ERROR
-    if decision.fail_safe or decision.hold or decision.stale:
+    if decision.fail_safe or decision.hold or decision.stale or decision.untrusted:
         return ros.msg.DiagnosticStatus.WARN
     return ros.msg.DiagnosticStatus.OK
 
@@ -99,7 +116,10 @@ class ArmPlannerNode:
             peer_timeout=float(p["peer_timeout"]),
             stale_policy=p["stale_policy"],
             u_max=float(p["u_max"]),
+            d_max=float(p["d_max"]),
+            jump_margin=float(p["jump_margin"]),
         )
+        fault = parse_fault(str(p["fault_injection"]))
         settings = PlannerSettings(
             epsilon=float(p["epsilon"]),
             t_plan=float(p["t_plan"]),
@@ -116,15 +136,29 @@ class ArmPlannerNode:
         if unmodelled:
             self.node.get_logger().warning(f"peers {list(unmodelled)} are NOT constrained")
         warm_up(planner, self.cell, arm_id)
+        self.fault = ""
+        if fault is not None:
+            planner = FaultInjectingPlanner(planner, fault)
+            self.fault = str(fault)
+            self.node.get_logger().warning(
+                f"fault_injection={self.fault} is ON: this node fails on purpose (tests only)"
+            )
         self.controller = ArmController(self.cell, arm_id, planner, control)
         self.robot = self.cell.arm(arm_id).robot
         self.kind = p["planner"]
         self._last_publish: float | None = None
         self._ready = False
+        #: Messages published and joint states received (printed at the stop, for load tests).
+        self.published = {"commands": 0, "statuses": 0}
+        self.received: dict[str, int] = dict.fromkeys(self.cell.arm_ids, 0)
 
         n = self.node
-        self.command_pub = n.create_publisher(ros.msg.Float64MultiArray, command_topic(arm_id), 10)
-        self.status_pub = n.create_publisher(ros.msg.DiagnosticStatus, status_topic(arm_id), 10)
+        self.command_pub = n.create_publisher(
+            ros.msg.Float64MultiArray, command_topic(arm_id), HISTORY
+        )
+        self.status_pub = n.create_publisher(
+            ros.msg.DiagnosticStatus, status_topic(arm_id), HISTORY
+        )
         for other in self.cell.arm_ids:
             n.create_subscription(
                 ros.msg.JointState,
@@ -145,23 +179,56 @@ class ArmPlannerNode:
         return lambda msg: self._on_state(arm_id, msg)
 
     def _on_state(self, arm_id: str, msg: Any) -> None:
-        reason = self.controller.states.update(arm_id, msg.name, msg.position, time.monotonic())
-        if reason is not None:
+        now = time.monotonic()
+        self.received[arm_id] += 1
+        try:
+            stamp = msg.header.stamp
+            stamp_ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+            note = self.controller.states.update(arm_id, msg.name, msg.position, now, stamp_ns)
+        except Exception as err:  # a malformed message never takes the node down
+            note = f"rejected: {type(err).__name__}: {err}"
+        if note is None:
+            return
+        untrusted = f"; {arm_id} untrusted for {self.controller.settings.peer_timeout:g} s"
+        if note.startswith("rejected"):
             self.node.get_logger().warning(
-                f"rejected joint state of {arm_id}: {reason}", throttle_duration_sec=2.0
+                f"joint state of {arm_id} {note} ({self.controller.states.rejected[arm_id]} "
+                f"rejected){untrusted}",
+                throttle_duration_sec=WARN_EVERY,
+            )
+        else:
+            self.node.get_logger().warning(
+                f"joint state of {arm_id} {note} ({self.controller.states.jumps[arm_id]} jumps)"
+                f"{untrusted}",
+                throttle_duration_sec=WARN_EVERY,
             )
 
     def _on_goal(self, msg: Any) -> None:
         try:
             goal = self.controller.set_goal(msg.name, msg.position)
-        except InvalidValueError as err:
-            self.node.get_logger().error(f"rejected goal: {err}", throttle_duration_sec=2.0)
+        except Exception as err:  # InvalidValueError, or a malformed message
+            self.node.get_logger().error(
+                f"rejected goal: {err}; keeping the previous goal", throttle_duration_sec=WARN_EVERY
+            )
             return
         self.node.get_logger().info(
             f"goal {[round(float(x), 3) for x in goal]}", throttle_duration_sec=5.0
         )
 
     def _on_tick(self) -> None:
+        try:
+            self._tick()
+        except Exception as err:  # a bug here must not end the node: stop the arm, report
+            self.node.get_logger().error(
+                f"tick failed ({type(err).__name__}: {err}); commanding zero velocity",
+                throttle_duration_sec=WARN_EVERY,
+            )
+            command = ros.msg.Float64MultiArray()
+            command.data = [0.0] * self.robot.dof
+            self.command_pub.publish(command)
+            self.published["commands"] += 1
+
+    def _tick(self) -> None:
         now = time.monotonic()
         stamp_ns = self.node.get_clock().now().nanoseconds
         decision = self.controller.tick(now, stamp_ns)
@@ -176,9 +243,41 @@ class ArmPlannerNode:
         command = ros.msg.Float64MultiArray()
         command.data = [float(u) for u in decision.velocity]
         self.command_pub.publish(command)
+        self.published["commands"] += 1
         period = math.nan if self._last_publish is None else now - self._last_publish
         self._last_publish = now
         self.status_pub.publish(serialize(self._status(decision, period, time.time_ns())))
+        self.published["statuses"] += 1
+        self._report(decision)
+
+    def _report(self, d: Decision) -> None:
+        """WARN lines for faults, at most one per cause every ``WARN_EVERY`` s."""
+        log, c = self.node.get_logger(), self.controller.counters
+        if d.error or d.status.startswith("failed"):
+            log.warning(
+                f"solver failed ({d.error or d.status}); commanding "
+                f"{'zero velocity' if d.hold else 'the fail-safe'} ({c.solver_errors} failures "
+                f"in {c.ticks} ticks)",
+                throttle_duration_sec=WARN_EVERY,
+            )
+        elif d.status == "deadline_missed":
+            log.warning(
+                f"solve of tick {d.tick} missed its deadline; commanding "
+                f"{'zero velocity' if d.hold else 'the fail-safe'} ({c.deadline_misses} misses "
+                f"in {c.ticks} ticks)",
+                throttle_duration_sec=WARN_EVERY,
+            )
+        if d.stale or d.untrusted:
+            action = "zero velocity" if d.hold else "the fail-safe"
+            log.warning(
+                f"peers stale {list(d.stale)} / untrusted {list(d.untrusted)}: commanding {action}",
+                throttle_duration_sec=WARN_EVERY,
+            )
+        if d.status == "own_state_untrusted":
+            log.warning(
+                "own joint states rejected or jumping: holding still",
+                throttle_duration_sec=WARN_EVERY,
+            )
 
     def _status(self, d: Decision, period: float, wall_ns: int) -> DiagnosticStatus:
         """The evaluation's status message (telemetry) plus the node's own counters."""
@@ -188,6 +287,7 @@ class ArmPlannerNode:
             "hold": str(d.hold).lower(),
             "stale_peers": ",".join(d.stale),
             "missing_peers": ",".join(d.missing),
+            "untrusted_peers": ",".join(d.untrusted),
             "error": d.error,
             "ticks": c.ticks,
             "deadline_misses": c.deadline_misses,
@@ -195,10 +295,13 @@ class ArmPlannerNode:
             "holds": c.holds,
             "solver_errors": c.solver_errors,
             "rejected_states": sum(self.controller.states.rejected.values()),
+            "state_jumps": sum(self.controller.states.jumps.values()),
             "period": repr(period),
             "publish_wall_ns": wall_ns,
             "command": ",".join(repr(float(u)) for u in d.velocity),
         }
+        if self.fault:
+            extra["fault_injection"] = self.fault
         last = self.controller.last_observation
         if last is not None:
             extra.update({f"age_{a}": f"{age:.4f}" for a, age in last.ages.items()})
@@ -214,6 +317,17 @@ class ArmPlannerNode:
             command = ros.msg.Float64MultiArray()
             command.data = [0.0] * self.robot.dof
             self.command_pub.publish(command)
+            self.published["commands"] += 1
+        c = self.controller.counters
+        counts = {
+            "published": self.published,
+            "received_joint_states": self.received,
+            "ticks": c.ticks,
+            "deadline_misses": c.deadline_misses,
+            "fail_safes": c.fail_safes,
+            "solver_errors": c.solver_errors,
+        }
+        print(f"arm_planner: stopped; counts {json.dumps(counts)}", flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -7,19 +7,28 @@ worker thread, so a solve has one whole period while the current command execute
 
 Rules, in order of precedence, for the command of a tick:
 
-1. no fresh own state, or no goal yet → hold still (zero velocity);
+1. no fresh own state, own state untrusted (see below), or no goal yet → hold still;
 2. the solve of the previous tick has not finished (missed deadline) → the fail-safe computed
    from the previous observations before that solve started (hold still once that fail-safe is
    older than ``peer_timeout``: a hung solver does not steer the arm on old information);
 3. a peer in the cell has never been heard from → hold still;
-4. a peer's state is stale (older than ``peer_timeout``) → ``stale_policy``: the fail-safe
-   against its last known state (``fail_safe``) or hold still (``hold``);
+4. a peer's state is stale (older than ``peer_timeout``) or untrusted → ``stale_policy``: hold
+   still (``hold``, the default) or the fail-safe against its latest valid state
+   (``fail_safe``). Holding is the default because it measured safer: with a silent peer that
+   runs NeHMO itself, 1 % collisions against 10 % for the fail-safe, which steers by where the
+   peer *was* (100 crossing dual-UR5 episodes, ``python -m nehmo_ros.fault_episodes``);
 5. the solver failed, was infeasible or late inside ``plan`` → the planner's fail-safe;
 6. otherwise the planner's command.
 
 Joint states that are NaN/inf, of the wrong length or with unknown joint names are rejected
-(counted and reported) and leave the previous state in place, so a peer sending only garbage
-turns stale. Times here are monotonic seconds given by the caller.
+(counted and reported) and leave the previous valid state in place, so a peer sending only
+garbage turns stale. A valid state that moved further than the arm can move since its previous
+one (a *jump*: more than ``jump_margin + 2·speed·Δt`` on some joint, ``speed`` = ``d_max`` for
+peers and ``u_max`` for the own arm, ``Δt`` the larger of the receive and the header-stamp
+intervals) is kept, since it is the newest measurement, but counted. A rejected state or a jump
+makes that arm *untrusted* for ``peer_timeout``: its data broke the model the planner's safety
+argument rests on (finite states, speeds bounded by ``d_max``). Times here are monotonic
+seconds given by the caller.
 """
 
 from __future__ import annotations
@@ -56,8 +65,10 @@ class ControlSettings:
     rate: float = 25.0
     deadline: float = 0.03  # budget of one solve inside a period (given to the planner too)
     peer_timeout: float = 0.25  # a joint state older than this is stale
-    stale_policy: str = "fail_safe"
+    stale_policy: str = "hold"
     u_max: float = 0.5  # [rad/s] every command is clipped to ±u_max
+    d_max: float = 0.5  # [rad/s] peers' speed bound: a peer state moving faster is a jump
+    jump_margin: float = 0.1  # [rad] slack of the jump test (inf: no jump test)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rate) and 0 < self.rate <= 1000):
@@ -70,8 +81,12 @@ class ControlSettings:
             raise InvalidValueError("peer_timeout", "must be > 0 [s]", self.peer_timeout)
         if self.stale_policy not in STALE_POLICIES:
             raise UnknownNameError("stale_policy", self.stale_policy, STALE_POLICIES)
-        if not self.u_max > 0:
-            raise InvalidValueError("u_max", "must be > 0 [rad/s]", self.u_max)
+        if not (math.isfinite(self.u_max) and self.u_max > 0):
+            raise InvalidValueError("u_max", "must be a finite number > 0 [rad/s]", self.u_max)
+        if not (math.isfinite(self.d_max) and self.d_max > 0):
+            raise InvalidValueError("d_max", "must be a finite number > 0 [rad/s]", self.d_max)
+        if not self.jump_margin > 0:
+            raise InvalidValueError("jump_margin", "must be > 0 [rad] (inf: off)", self.jump_margin)
 
     @property
     def period(self) -> float:
@@ -83,35 +98,85 @@ class ControlSettings:
 class _Latest:
     q: np.ndarray
     received: float  # [s] monotonic
+    stamp_ns: int  # header stamp [ns] (0: none)
 
 
 class StateBuffer:
-    """Latest valid joint state [rad] of every arm of a cell, with its receive time."""
+    """Latest valid joint state [rad] of every arm of a cell, with its receive time.
 
-    def __init__(self, cell: Cell) -> None:
+    ``speed`` [rad/s] per arm and ``jump_margin`` [rad] set the jump test (module docstring);
+    without them only malformed states are caught.
+    """
+
+    def __init__(
+        self,
+        cell: Cell,
+        speed: Mapping[str, float] | None = None,
+        jump_margin: float = math.inf,
+    ) -> None:
         self.cell = cell
+        self.speed = dict(speed or {})
+        self.jump_margin = jump_margin
         self._lock = threading.Lock()
         self._latest: dict[str, _Latest] = {}
+        self._untrusted_at: dict[str, float] = {}
         self.rejected: dict[str, int] = {a: 0 for a in cell.arm_ids}
+        self.jumps: dict[str, int] = {a: 0 for a in cell.arm_ids}
         self.last_rejection: dict[str, str] = {}
 
     def update(
-        self, arm_id: str, names: Sequence[str], position: Sequence[float], now: float
+        self,
+        arm_id: str,
+        names: Sequence[str],
+        position: Sequence[float],
+        now: float,
+        stamp_ns: int = 0,
     ) -> str | None:
-        """Store a joint state; returns why it was rejected, or None when accepted."""
+        """Store a joint state. Returns None for a plain valid state, else what was wrong:
+        ``"rejected: ..."`` (not stored) or ``"jumped ..."`` (stored, arm untrusted)."""
         robot = self.cell.arm(arm_id).robot
-        reason = None
         try:
             q = order_joints(robot, names, position, f"/{arm_id}/joint_states")
-        except InvalidValueError as err:
-            reason = str(err)
-        with self._lock:
-            if reason is not None:
+        except (InvalidValueError, ValueError, TypeError) as err:
+            with self._lock:
                 self.rejected[arm_id] += 1
-                self.last_rejection[arm_id] = reason
-                return reason
-            self._latest[arm_id] = _Latest(q, now)
-        return None
+                self.last_rejection[arm_id] = str(err)
+                self._untrusted_at[arm_id] = now
+            return f"rejected: {err}"
+        note = None
+        with self._lock:
+            previous = self._latest.get(arm_id)
+            if previous is not None and math.isfinite(self.jump_margin):
+                note = self._jump(arm_id, previous, q, now, stamp_ns)
+                if note is not None:
+                    self.jumps[arm_id] += 1
+                    self._untrusted_at[arm_id] = now
+            self._latest[arm_id] = _Latest(q, now, stamp_ns)
+        return note
+
+    def _jump(
+        self, arm_id: str, previous: _Latest, q: np.ndarray, now: float, stamp_ns: int
+    ) -> str | None:
+        """Why ``q`` is a jump from ``previous``, or None when it is reachable."""
+        robot = self.cell.arm(arm_id).robot
+        dt = max(now - previous.received, 0.0)
+        if stamp_ns > 0 and previous.stamp_ns > 0:
+            dt = max(dt, (stamp_ns - previous.stamp_ns) / 1e9)
+        speed = self.speed.get(arm_id, math.inf)
+        allowed = self.jump_margin + 2.0 * speed * dt
+        step = np.abs(robot.wrap(q - previous.q))
+        if not float(step.max()) > allowed:
+            return None
+        joint = robot.joint_names[int(np.argmax(step))]
+        return (
+            f"jumped {float(step.max()):.3f} rad on {joint} in {dt * 1e3:.0f} ms (allowed "
+            f"{allowed:.3f} rad at {speed:g} rad/s)"
+        )
+
+    def untrusted(self, now: float, window: float) -> tuple[str, ...]:
+        """Arms whose data was rejected or jumped within the last ``window`` seconds."""
+        with self._lock:
+            return tuple(a for a, t in self._untrusted_at.items() if now - t <= window)
 
     def get(self, arm_id: str) -> tuple[np.ndarray, float] | None:
         """``(q, receive time)`` of ``arm_id``'s latest valid state, or None."""
@@ -151,6 +216,8 @@ class Observation:
     stale: tuple[str, ...]  # peers whose last state is older than peer_timeout
     missing: tuple[str, ...]  # peers never heard from
     goal: np.ndarray | None
+    untrusted: tuple[str, ...] = ()  # peers with rejected or jumping states lately
+    own_untrusted: bool = False  # the own arm's states were rejected or jumped lately
 
 
 @dataclass(frozen=True)
@@ -167,6 +234,7 @@ class Decision:
     telemetry: Telemetry | None = None  # the planner's own report, when it ran
     stale: tuple[str, ...] = ()
     missing: tuple[str, ...] = ()
+    untrusted: tuple[str, ...] = ()
     error: str = ""
 
     @property
@@ -218,6 +286,11 @@ class SolveWorker:
         with self._cond:
             return self._busy
 
+    def wait_idle(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` [s] until no job runs; True if idle."""
+        with self._cond:
+            return self._cond.wait_for(lambda: not self._busy, timeout)
+
     def stop(self, timeout: float = 1.0) -> None:
         """Stop the thread (a job in flight is allowed to finish within ``timeout``)."""
         with self._cond:
@@ -237,6 +310,7 @@ class SolveWorker:
             result = self._solve(job)
             with self._cond:
                 self._result, self._busy = result, False
+                self._cond.notify_all()
 
 
 # ----------------------------------------------------------------------------- the controller
@@ -267,7 +341,9 @@ class ArmController:
         self.planner = planner
         self.settings = settings or ControlSettings()
         self.peer_ids = tuple(a for a in cell.arm_ids if a != arm_id)
-        self.states = StateBuffer(cell)
+        s = self.settings
+        speed = {a: s.u_max if a == arm_id else s.d_max for a in cell.arm_ids}
+        self.states = StateBuffer(cell, speed, s.jump_margin)
         self.counters = Counters()
         self._goal: np.ndarray | None = None
         self._goal_lock = threading.Lock()
@@ -318,8 +394,18 @@ class ArmController:
             peers[arm_id] = got[0]
             if ages[arm_id] > s.peer_timeout:
                 stale.append(arm_id)
+        untrusted = self.states.untrusted(now, s.peer_timeout)
         return Observation(
-            self._tick, stamp_ns, q_self, peers, ages, tuple(stale), tuple(missing), self.goal
+            self._tick,
+            stamp_ns,
+            q_self,
+            peers,
+            ages,
+            tuple(stale),
+            tuple(missing),
+            self.goal,
+            untrusted=tuple(a for a in untrusted if a != self.arm_id and a in peers),
+            own_untrusted=self.arm_id in untrusted,
         )
 
     # -- the tick (timer thread) ------------------------------------------------------------
@@ -367,11 +453,15 @@ class ArmController:
         c.ticks += 1
         c.fail_safes += int(decision.fail_safe)
         c.holds += int(decision.hold)
-        c.solver_errors += int(bool(decision.error))
+        c.solver_errors += int(bool(decision.error) or decision.status.startswith("failed"))
 
     def stop(self) -> None:
         """Stop the worker thread."""
         self._worker.stop()
+
+    def wait_idle(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` [s] for the solve in flight (lock-step runs); True if idle."""
+        return self._worker.wait_idle(timeout)
 
     # -- the solve (worker thread) ----------------------------------------------------------
     def _solve(self, obs: Observation) -> Decision:
@@ -395,6 +485,7 @@ class ArmController:
             solve_time=decision.telemetry.solve_time if decision.telemetry else job_time,
             stale=obs.stale,
             missing=obs.missing,
+            untrusted=obs.untrusted,
         )
 
     def _hold(self, status: str) -> Decision:
@@ -409,6 +500,8 @@ class ArmController:
     def _decide(self, obs: Observation) -> Decision:
         if obs.q_self is None:
             return self._hold("no_own_state")
+        if obs.own_untrusted:
+            return self._hold("own_state_untrusted")
         if obs.goal is None:
             return self._hold("no_goal")
         if obs.missing:
@@ -416,10 +509,11 @@ class ArmController:
         fallback = self._fail_safe_velocity(obs.q_self, obs.peers)
         with self._fallback_lock:
             self._fallback = (obs.tick, fallback)
-        if obs.stale:
+        if obs.stale or obs.untrusted:
+            status = "stale_peer" if obs.stale else "untrusted_peer"
             if self.settings.stale_policy == "hold":
-                return self._hold("stale_peer")
-            return Decision(fallback, "stale_peer", fail_safe=True)
+                return self._hold(status)
+            return Decision(fallback, status, fail_safe=True)
         result = self.planner.plan(obs.q_self, obs.peers, obs.goal)
         t = result.telemetry
         return Decision(result.velocity, t.status, fail_safe=t.fail_safe, telemetry=t)

@@ -20,8 +20,16 @@ from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.robots import load_cell
 from nehmo_core.robots.model import Cell
 from nehmo_ros import ros
+from nehmo_ros.oneline import one_line
 
-__all__ = ["NODE_ERRORS", "StoppableNode", "declare_parameters", "load_cell_parameter", "run_main"]
+__all__ = [
+    "NODE_ERRORS",
+    "StoppableNode",
+    "declare_parameters",
+    "load_cell_parameter",
+    "one_line",
+    "run_main",
+]
 
 #: Errors that mean "bad input at start-up": printed as one line, exit status 2.
 NODE_ERRORS: tuple[type[BaseException], ...] = (*ros.PARAMETER_ERRORS, NehmoError, OSError)
@@ -70,7 +78,7 @@ def run_main(
         try:
             wrapper = build()
         except NODE_ERRORS as err:
-            print(f"{program}: error: {err}", file=sys.stderr, flush=True)
+            print(f"{program}: error: {one_line(err)}", file=sys.stderr, flush=True)
             return 2
         stop = threading.Event()
 

@@ -45,6 +45,7 @@ from nehmo_core.sim.scenarios import (
     load_scenario_set,
     save_scenario_set,
 )
+from nehmo_ros.oneline import one_line
 
 __all__ = ["SuiteSettings", "main", "run_episode", "run_suite"]
 
@@ -403,6 +404,17 @@ def _run(args: argparse.Namespace) -> int:
     return 0 if summary["metrics"] is not None else 1
 
 
+@contextmanager
+def _readable(path: str) -> Iterator[None]:
+    """Turn the MCAP library's errors about ``path`` into one that names the file."""
+    from mcap.exceptions import McapError
+
+    try:
+        yield
+    except McapError as exc:
+        raise NehmoError(f"{path}: not a readable MCAP log ({exc})") from None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `orchestrate` console script."""
     args = build_parser().parse_args(argv)
@@ -410,14 +422,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "run":
             return _run(args)
         if args.command == "evaluate":
-            results = [evaluate_log(p) for p in args.logs]
+            results = []
+            for path in args.logs:
+                with _readable(path):
+                    results.append(evaluate_log(path))
             for path, r in zip(args.logs, results, strict=True):
                 print(f"{path}: {r.outcome} at {r.end_time:.2f} s, path {r.path_length:.2f} rad")
             print(format_metrics(aggregate(results).to_dict()))
             return 0
-        return replay(Path(args.log), args.rate, args.topics, args.domain_id)
-    except NehmoError as exc:
-        print(f"orchestrate: error: {exc}", file=sys.stderr)
+        with _readable(args.log):
+            return replay(Path(args.log), args.rate, args.topics, args.domain_id)
+    except (NehmoError, OSError) as exc:
+        print(f"orchestrate: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("orchestrate: interrupted", file=sys.stderr)

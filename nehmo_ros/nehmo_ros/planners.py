@@ -66,6 +66,10 @@ def build_planner(
         models = registry.models_for(kind, cell) if kind in OPT_KINDS else []
     except NehmoError as exc:
         raise NehmoError(f"parameter `model` ({model!r}): {exc}") from None
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:  # a malformed model card
+        raise NehmoError(
+            f"parameter `model` ({model!r}): malformed model file ({type(exc).__name__}: {exc})"
+        ) from None
     if kind in OPT_KINDS and not models:
         raise InvalidValueError(
             "model", f"provides no pair value model for the arms of cell {cell.name!r}", model

@@ -18,7 +18,9 @@ Durability: the log is flushed every ``flush_every`` messages or ``flush_interva
 SIGINT/SIGTERM the node takes what is still queued, then writes the summary: nothing received
 is lost. After SIGKILL the file lacks its summary; repair it with
 ``python -m nehmo_core.logs.recover broken.mcap fixed.mcap`` (loses at most the last flush
-interval).
+interval). An existing ``output`` is never overwritten: the node records to
+``<stem>_1.mcap`` (``_2`` ...) instead and says so. A message that cannot be written (disk
+full, ...) is counted and reported, and recording goes on.
 """
 
 from __future__ import annotations
@@ -55,7 +57,9 @@ STAMP_SOURCES = ("header", "receive")
 STAMPED_TYPES = (JOINT_STATE_TYPE, COLLISIONS_TYPE, CLOCK_TYPE)
 
 LATCHED = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
-RECORDING = ros.QoSProfile(depth=100)
+#: Reader history per topic: 10 s of 100 Hz joint states, so a recorder that stalls (a loaded
+#: machine) catches up without evicting anything; publishers keep 2 s (bridge, planners).
+RECORDING = ros.QoSProfile(depth=1000)
 
 
 def leading_stamp_ns(data: bytes) -> int:
@@ -64,6 +68,16 @@ def leading_stamp_ns(data: bytes) -> int:
     sec = int(reader.primitive("int32"))  # type: ignore[call-overload]
     nanosec = int(reader.primitive("uint32"))  # type: ignore[call-overload]
     return sec * 1_000_000_000 + nanosec
+
+
+def free_path(path: Path) -> Path:
+    """``path``, or ``<stem>_<n>.mcap`` with the first ``n`` that names no existing file."""
+    if not path.exists():
+        return path
+    n = 1
+    while (candidate := path.with_name(f"{path.stem}_{n}{path.suffix}")).exists():
+        n += 1
+    return candidate
 
 
 def is_latched(topic: str) -> bool:
@@ -89,9 +103,18 @@ class RecorderNode:
         path = Path(output)
         if path.suffix != ".mcap":
             raise InvalidValueError("output", "must be a path ending in .mcap", output)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.writer = LogWriter(path, settings, library="nehmo_ros recorder")
+        path = free_path(path)
+        if str(path) != str(Path(output)):
+            n.get_logger().warning(f"{output} exists: recording to {path} instead")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self.writer = LogWriter(path, settings, library="nehmo_ros recorder")
+        except OSError as err:
+            raise InvalidValueError(
+                "output", f"must be a writable file path ({err.strerror or err})", output
+            ) from None
         self.path = path
+        self.lost = 0
         self.topics = run_topics(list(self.cell.arm_ids))
         for topic, msgtype in self.topics.items():
             latched = is_latched(topic)
@@ -118,14 +141,36 @@ class RecorderNode:
 
     def _on_message(self, topic: str, msgtype: str, data: bytes, stamped: bool) -> None:
         received = self.node.get_clock().now().nanoseconds
-        log_time = leading_stamp_ns(data) if stamped else received
-        self.writer.write_raw(topic, data, max(log_time, 0), received, msgtype)
+        try:
+            log_time = leading_stamp_ns(data) if stamped else received
+        except Exception:  # a message too short to hold a stamp: log it at its receive time
+            log_time = received
+        try:
+            self.writer.write_raw(topic, data, max(log_time, 0), received, msgtype)
+        except Exception as err:  # disk full, ...: count, report, keep recording
+            self.lost += 1
+            self.node.get_logger().error(
+                f"cannot write a message of {topic} ({type(err).__name__}: {err}); "
+                f"{self.lost} lost so far",
+                throttle_duration_sec=2.0,
+            )
+            return
         self.count += 1
 
     def on_stop(self) -> None:
         """Write the summary (the queued messages were taken by the final drain)."""
-        self.writer.close()
-        print(f"recorder: {self.count} messages written to {self.path}", flush=True)
+        try:
+            self.writer.close()
+        except Exception as err:
+            print(
+                f"recorder: error: cannot finish {self.path} ({type(err).__name__}: {err}); "
+                f"repair it with: python -m nehmo_core.logs.recover {self.path} <fixed.mcap>",
+                file=sys.stderr,
+                flush=True,
+            )
+            return
+        lost = f", {self.lost} could not be written" if self.lost else ""
+        print(f"recorder: {self.count} messages written to {self.path}{lost}", flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

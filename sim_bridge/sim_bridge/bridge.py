@@ -15,9 +15,12 @@ self-collision exactly, and publishes:
   ``use_sim_time:=true``. Without ``sim_time`` the stamps are wall time.
 
 It subscribes to ``/<arm>/velocity_controller/commands`` (std_msgs/Float64MultiArray, one value
-per joint in the robot's joint order). Commands of the wrong length or not finite are dropped
-(ros2_control drops wrong lengths silently; here each is counted and logged). **Watchdog:** an
-arm whose latest command is older than ``command_timeout`` holds still.
+per joint in the robot's joint order). Commands of the wrong length, not finite or beyond a
+joint's velocity limit (the URDF's) are dropped (ros2_control drops wrong lengths silently; here
+each is counted and logged). **Watchdog:** an arm whose latest command is older than
+``command_timeout`` holds still; each time that happens to an arm that was being commanded
+(its planner died, hung or lost the connection) a WARN line says so, and another when commands
+resume; the episode's end line counts the trips per arm.
 
 **Scenario reset.** At start the cell is set to an episode's start configuration: episode
 ``episode`` of the scenario set file ``scenarios`` (nehmo_core.sim.scenarios JSON), or, without
@@ -94,6 +97,9 @@ DEFAULTS: dict[str, Any] = {
 
 #: Goals and the scenario are latched (transient local): late subscribers still get them.
 LATCHED = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
+#: History of the streaming publishers (reliable, keep last): 2 s at 100 Hz, so a reliable
+#: subscriber (the recorder) that stalls for up to 2 s on a loaded machine loses nothing.
+HISTORY = 200
 
 
 @dataclass(frozen=True)
@@ -201,7 +207,7 @@ class SimBridgeNode:
         self.metadata = self._metadata(kinds, source)
 
         self.state_pubs = {
-            a: n.create_publisher(ros.msg.JointState, joint_states_topic(a), 10)
+            a: n.create_publisher(ros.msg.JointState, joint_states_topic(a), HISTORY)
             for a in self.cell.arm_ids
         }
         self.goal_pubs = {
@@ -209,13 +215,20 @@ class SimBridgeNode:
             for a in self.cell.arm_ids
         }
         self.scenario_pub = n.create_publisher(ros.msg.String, SCENARIO_TOPIC, LATCHED)
-        self.collision_pub = n.create_publisher(ros.msg.DiagnosticArray, COLLISIONS_TOPIC, 10)
+        self.collision_pub = n.create_publisher(ros.msg.DiagnosticArray, COLLISIONS_TOPIC, HISTORY)
         self.clock_pub = (
-            n.create_publisher(ros.msg.Clock, CLOCK_TOPIC, 10) if self.s.sim_time else None
+            n.create_publisher(ros.msg.Clock, CLOCK_TOPIC, HISTORY) if self.s.sim_time else None
         )
         self.commands: dict[str, tuple[np.ndarray, float]] = {}
         self.commanded: set[str] = set()
         self.dropped: dict[str, int] = dict.fromkeys(self.cell.arm_ids, 0)
+        self.watchdog_trips: dict[str, int] = dict.fromkeys(self.cell.arm_ids, 0)
+        #: Messages published (printed at the stop, for load tests).
+        self.published = {"joint_states_per_arm": 0, "clock": 0, "collisions": 0}
+        self._held: set[str] = set()  # arms the watchdog holds now
+        self.velocity_limits = {
+            a.arm_id: np.array([j.velocity for j in a.robot.joints]) for a in self.cell.arms
+        }
         for a in self.cell.arm_ids:
             n.create_subscription(
                 ros.msg.Float64MultiArray, command_topic(a), self._command_callback(a), 10
@@ -295,8 +308,10 @@ class SimBridgeNode:
         t_ns = self._stamp_ns()
         if self.clock_pub is not None:
             self.clock_pub.publish(serialize(Clock(clock=stamp(t_ns))))
+            self.published["clock"] += 1
         for a, pub in self.state_pubs.items():
             pub.publish(self._joint_state(a, self.sim.q[a], velocities[a], t_ns))
+        self.published["joint_states_per_arm"] += 1
 
     # -- callbacks ----------------------------------------------------------------------------
     def _command_callback(self, arm_id: str) -> Callable[[Any], None]:
@@ -304,12 +319,21 @@ class SimBridgeNode:
 
     def _on_command(self, arm_id: str, msg: Any) -> None:
         robot = self.cell.arm(arm_id).robot
-        data = np.asarray(list(msg.data), dtype=np.float64)
-        if data.shape != (robot.dof,) or not np.all(np.isfinite(data)):
+        try:
+            data = np.asarray(list(msg.data), dtype=np.float64)
+        except (TypeError, ValueError):
+            data = np.full(0, np.nan)
+        limits = self.velocity_limits[arm_id]
+        if (
+            data.shape != (robot.dof,)
+            or not np.all(np.isfinite(data))
+            or np.any(np.abs(data) > limits + 1e-9)
+        ):
             self.dropped[arm_id] += 1
             self.node.get_logger().warning(
-                f"dropped command of {arm_id}: needs {robot.dof} finite values, got "
-                f"{data.tolist()} ({self.dropped[arm_id]} dropped)",
+                f"dropped command of {arm_id}: needs {robot.dof} finite values within the "
+                f"velocity limits {limits.tolist()} rad/s, got {data.tolist()} "
+                f"({self.dropped[arm_id]} dropped)",
                 throttle_duration_sec=2.0,
             )
             return
@@ -323,11 +347,30 @@ class SimBridgeNode:
         for arm in self.cell.arms:
             latest = self.commands.get(arm.arm_id)
             fresh = latest is not None and now - latest[1] <= self.s.command_timeout
+            if self.started and not self.done:
+                self._watch(arm.arm_id, latest is not None and not fresh, now, latest)
             moving = self.started and not self.done and fresh
             out[arm.arm_id] = (
                 latest[0] if moving and latest is not None else np.zeros(arm.robot.dof)
             )
         return out
+
+    def _watch(
+        self, arm_id: str, expired: bool, now: float, latest: tuple[np.ndarray, float] | None
+    ) -> None:
+        """Report the watchdog taking over an arm (and giving it back)."""
+        if expired and arm_id not in self._held:
+            self._held.add(arm_id)
+            self.watchdog_trips[arm_id] += 1
+            age = now - latest[1] if latest is not None else math.inf
+            self.node.get_logger().warning(
+                f"watchdog: no command for {arm_id} in {age:.2f} s (> command_timeout "
+                f"{self.s.command_timeout:g} s): holding it still "
+                f"(trip {self.watchdog_trips[arm_id]})"
+            )
+        elif not expired and arm_id in self._held:
+            self._held.discard(arm_id)
+            self.node.get_logger().info(f"watchdog: commands for {arm_id} resumed")
 
     def _step(self) -> None:
         if not self.started:
@@ -339,6 +382,7 @@ class SimBridgeNode:
             if result.collisions:
                 msg = collisions_message(result.collisions, self._stamp_ns())
                 self.collision_pub.publish(serialize(msg))
+                self.published["collisions"] += 1
             self._check_done(bool(result.collisions))
         self._publish_state(velocities)
 
@@ -379,8 +423,10 @@ class SimBridgeNode:
             self.done = True
             self._done_at = time.monotonic()
             dropped = sum(self.dropped.values())
+            trips = {a: n for a, n in self.watchdog_trips.items() if n}
             self.node.get_logger().info(
-                f"episode done: {self.outcome} after {t:.2f} s ({dropped} commands dropped)"
+                f"episode done: {self.outcome} after {t:.2f} s ({dropped} commands dropped, "
+                f"watchdog trips {trips})"
             )
             print(f"sim_bridge: episode {self.outcome} t={t:.3f}", flush=True)
 
@@ -393,6 +439,15 @@ class SimBridgeNode:
     def on_stop(self) -> None:
         self.timer.cancel()
         self.sim.close()
+        if not self.done:
+            state = "running" if self.started else "not started"
+            print(f"sim_bridge: stopped, episode {state} t={self.t_ns / 1e9:.3f}", flush=True)
+        counts = {
+            "published": self.published,
+            "dropped_commands": self.dropped,
+            "watchdog_trips": self.watchdog_trips,
+        }
+        print(f"sim_bridge: counts {json.dumps(counts)}", flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -4,7 +4,8 @@ Logs are rosbag2-compatible MCAP (profile ``ros2``, ``ros2msg`` schemas, ``cdr``
 ``ros2 bag``, Foxglove and the ``mcap`` and ``rosbags`` readers open them. Topics are
 listed in :mod:`nehmo_core.logs.topics`; message classes and their CDR codec live in
 :mod:`nehmo_core.logs.messages`. A log whose writer was killed is repaired with
-``python -m nehmo_core.logs.recover broken.mcap fixed.mcap``.
+``python -m nehmo_core.logs.recover broken.mcap fixed.mcap`` (in code:
+:func:`nehmo_core.logs.recover.recover`).
 """
 
 from nehmo_core.logs.messages import (
@@ -34,7 +35,6 @@ from nehmo_core.logs.reader import (
     read_scenario,
     summarize,
 )
-from nehmo_core.logs.recover import RecoveryReport, recover
 from nehmo_core.logs.topics import (
     CLOCK_TOPIC,
     COLLISIONS_TOPIC,
@@ -69,7 +69,6 @@ __all__ = [
     "MultiArrayDimension",
     "MultiArrayLayout",
     "QosDescription",
-    "RecoveryReport",
     "RosMessage",
     "String",
     "Time",
@@ -83,10 +82,10 @@ __all__ = [
     "message_definition",
     "read_log",
     "read_scenario",
-    "recover",
     "run_topics",
     "serialize",
     "status_topic",
     "summarize",
     "topic_type",
 ]
+

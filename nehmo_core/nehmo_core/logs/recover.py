@@ -5,6 +5,9 @@ file sequentially, without seeking, keeps every schema, channel, message and met
 to the point where the data stops making sense, and rewrites them into a finished file::
 
     python -m nehmo_core.logs.recover broken.mcap fixed.mcap
+
+The damaged file is only read. An existing output file is not overwritten unless asked
+(``--force``), so swapping the two arguments cannot destroy a log.
 """
 
 from __future__ import annotations
@@ -36,8 +39,9 @@ class RecoveryReport:
     stopped_by: str
 
 
-def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
-    """Rewrite every readable record of `src` into a finished MCAP file `dst`."""
+def recover(src: str | Path, dst: str | Path, overwrite: bool = False) -> RecoveryReport:
+    """Rewrite every readable record of `src` into a finished MCAP file `dst` (an existing
+    `dst` is an error unless `overwrite`)."""
     from mcap.records import Channel, Footer, Header, Message, Metadata, Schema
     from mcap.stream_reader import StreamReader
     from mcap.writer import CompressionType, Writer
@@ -47,6 +51,13 @@ def recover(src: str | Path, dst: str | Path) -> RecoveryReport:
         raise LogFileError(f"log {str(src)!r} does not exist")
     if src.resolve() == dst.resolve():
         raise LogFileError("recover writes a new file: give an output path other than the input")
+    if dst.exists() and not overwrite:
+        raise LogFileError(
+            f"output {str(dst)!r} exists; recover does not overwrite it (remove it, choose "
+            "another path or pass --force)"
+        )
+    if not dst.parent.is_dir():
+        raise LogFileError(f"output directory {str(dst.parent)!r} does not exist")
 
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
@@ -136,11 +147,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("src", help="the damaged log (left untouched)")
     parser.add_argument("dst", help="the recovered log to write")
+    parser.add_argument("--force", action="store_true", help="overwrite an existing dst")
     args = parser.parse_args(argv)
     try:
-        report = recover(args.src, args.dst)
-    except (NehmoError, OSError) as err:
+        report = recover(args.src, args.dst, overwrite=args.force)
+    except NehmoError as err:
         print(f"recover: error: {err}", file=sys.stderr)
+        return 1
+    except OSError as err:
+        print(f"recover: error: cannot read {args.src} or write {args.dst}: {err}", file=sys.stderr)
         return 1
     state = "complete file" if report.complete else f"cut found ({report.stopped_by})"
     print(

@@ -66,13 +66,15 @@ class RcutilsLogger:
     ) -> bool:
         if LOG_LEVELS.index(level) < self._level:
             return False
-        key = (level, str(message)) if once else (level, "")
+        # As in rclpy, `once` and throttling apply per call site (the caller of info(), ...),
+        # so a message whose text changes (counts, values) is still throttled.
+        caller = sys._getframe(2)
+        site = (level, f"{caller.f_code.co_filename}:{caller.f_lineno}")
         if once:
-            if key in self._once:
+            if site in self._once:
                 return False
-            self._once.add(key)
+            self._once.add(site)
         if throttle_duration_sec is not None or skip_first:
-            site = (level, str(message))
             now = time.monotonic()
             last = self._last.get(site)
             if last is None:

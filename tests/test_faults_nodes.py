@@ -1,0 +1,371 @@
+"""Faults around a running ``arm_planner`` process: bad peers and a failing solver.
+
+The test process stands in for the bridge (a :class:`World` on the embedded runtime, in this
+run's DDS domain): it publishes every arm's joint states at 50 Hz, integrating the planners'
+commands, the goals (latched), and scripts faults into what the planners receive. Planners run
+as real node processes; their ``/<arm>/planner/status`` stream and log lines are the evidence.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from _ros_testutil import DOMAIN_ID, child_env
+
+from nehmo_core.robots import load_cell
+from nehmo_core.robots.model import Cell
+from nehmo_core.sim.scenarios import sample_scenario, scenario_rng
+from nehmo_ros import msgs
+from nehmo_ros.orchestrate import Process, node_command
+
+#: What a status says when the planner itself ran on the tick's observations.
+PLANNED = {"optimal", "naive", "unconstrained", "infeasible", "iteration_limit", "timeout"}
+STARTUP_S = 240.0  # loaded 2-core machines start node processes slowly
+
+Script = Callable[[float], "tuple[list[str], list[float]] | str | None"]
+
+
+@dataclass
+class Status:
+    """One received planner status: arrival time [s, monotonic], message, level, values."""
+
+    t: float
+    message: str
+    level: bytes
+    values: dict[str, str]
+
+    @property
+    def command(self) -> np.ndarray:
+        return np.array([float(x) for x in self.values["command"].split(",")])
+
+
+@dataclass
+class World:
+    """Joint states of every arm at 50 Hz (integrating commands), goals, and scripted faults."""
+
+    cell: Cell
+    q: dict[str, np.ndarray]
+    goals: dict[str, np.ndarray]
+    scripts: dict[str, Script] = field(default_factory=dict)
+    statuses: dict[str, list[Status]] = field(default_factory=dict)
+    script_start: float = math.inf
+
+    def __post_init__(self) -> None:
+        from nehmo_ros import ros
+
+        self.ros = ros
+        ros.init(args=[], domain_id=DOMAIN_ID)
+        self.node = n = ros.Node("fake_world")
+        latched = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
+        self.state_pubs = {
+            a: n.create_publisher(msgs.JointState, f"/{a}/joint_states", 10)
+            for a in self.cell.arm_ids
+        }
+        self.goal_pubs = {
+            a: n.create_publisher(msgs.JointState, f"/{a}/goal", latched) for a in self.cell.arm_ids
+        }
+        self.commands: dict[str, np.ndarray] = {}
+        for a in self.cell.arm_ids:
+            self.statuses[a] = []
+            n.create_subscription(
+                msgs.Float64MultiArray,
+                f"/{a}/velocity_controller/commands",
+                lambda m, a=a: self.commands.__setitem__(a, np.array(m.data)),
+                10,
+            )
+            n.create_subscription(
+                msgs.DiagnosticStatus, f"/{a}/planner/status", lambda m, a=a: self._status(a, m), 50
+            )
+        for a, goal in self.goals.items():
+            self.publish_goal(a, list(goal))
+        self.last = time.monotonic()
+        n.create_timer(0.02, self._tick)
+        self.executor = ros.SingleThreadedExecutor()
+        self.executor.add_node(n)
+
+    def names(self, arm_id: str) -> list[str]:
+        return list(self.cell.arm(arm_id).robot.joint_names)
+
+    def publish_goal(self, arm_id: str, position: list[float]) -> None:
+        self.goal_pubs[arm_id].publish(msgs.JointState(name=self.names(arm_id), position=position))
+
+    def _status(self, arm_id: str, m: Any) -> None:
+        values = {kv.key: kv.value for kv in m.values}
+        self.statuses[arm_id].append(Status(time.monotonic(), m.message, m.level, values))
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        dt, self.last = now - self.last, now
+        stamp = msgs.Time(sec=int(time.time()), nanosec=time.time_ns() % 1_000_000_000)
+        for a, pub in self.state_pubs.items():
+            robot = self.cell.arm(a).robot
+            u = self.commands.get(a)
+            if u is not None and u.shape == (robot.dof,):
+                self.q[a] = np.clip(self.q[a] + dt * u, robot.lower, robot.upper)
+            names, position = self.names(a), [float(x) for x in self.q[a]]
+            script = self.scripts.get(a)
+            shown = script(now - self.script_start) if script and now >= self.script_start else None
+            if shown == "silent":
+                continue
+            if isinstance(shown, tuple):
+                names, position = shown
+            pub.publish(
+                msgs.JointState(
+                    header=msgs.Header(stamp=stamp), name=names, position=position, velocity=[]
+                )
+            )
+
+    def spin(self, seconds: float, until: Callable[[], bool] | None = None) -> bool:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(0.01)
+            if until is not None and until():
+                return True
+        return until is None
+
+    def close(self) -> None:
+        self.node.destroy_node()
+        self.ros.try_shutdown()
+
+
+def _planner(arm_id: str, cell: str, log: Path, **params: object) -> Process:
+    argv = node_command(
+        "nehmo_ros.arm_planner",
+        {"arm_id": arm_id, "cell": cell, "model": "shipped", **params},
+        ["-r", f"__node:=planner_{arm_id}"],
+    )
+    return Process(arm_id, argv, child_env(), log, 0)
+
+
+def _scenario(cell: Cell) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    s = sample_scenario(cell, scenario_rng(0, 0))
+    return {a: np.array(q) for a, q in s.start.items()}, {a: np.array(q) for a, q in s.goal.items()}
+
+
+def _window(statuses: list[Status], start: float, end: float) -> list[Status]:
+    return [s for s in statuses if start <= s.t < end]
+
+
+def _warnings(text: str, pattern: str) -> list[str]:
+    return [line for line in text.splitlines() if "[WARN]" in line and re.search(pattern, line)]
+
+
+# ------------------------------------------------------------------------------ peer faults
+PHASES = [  # (name, seconds): what the peer ur5_1 sends, one after the other
+    ("normal", 2.0),
+    ("nan", 1.2),
+    ("normal", 1.5),
+    ("short", 1.2),
+    ("normal", 1.5),
+    ("teleport", 1.2),
+    ("normal", 1.5),
+    ("silent", 1.2),
+    ("normal", 2.0),
+]
+
+
+def _phase_at(t: float) -> tuple[str, float]:
+    start = 0.0
+    for name, seconds in PHASES:
+        if t < start + seconds:
+            return name, start
+        start += seconds
+    return "normal", start
+
+
+@pytest.fixture(scope="module")
+def peer_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[World, list, str, int]:
+    """One planner (ur5_0) while its peer ur5_1 goes through PHASES; a goal outside the joint
+    limits arrives in the last normal phase."""
+    cell = load_cell("dual_ur5")
+    start, goals = _scenario(cell)
+    world = World(cell, start, {"ur5_0": goals["ur5_0"]})
+    peer_names = world.names("ur5_1")
+
+    def peer(t: float) -> tuple[list[str], list[float]] | str | None:
+        phase, _ = _phase_at(t)
+        q = [float(x) for x in world.q["ur5_1"]]
+        if phase == "nan":
+            return peer_names, [math.nan, *q[1:]]
+        if phase == "short":
+            return peer_names[:5], q[:5]
+        if phase == "teleport":
+            return peer_names, [q[0] + 0.8, q[1] + 0.5, *q[2:]]
+        if phase == "silent":
+            return "silent"
+        return None
+
+    world.scripts["ur5_1"] = peer
+    log = tmp_path_factory.mktemp("peer") / "planner.log"
+    proc = _planner("ur5_0", "dual_ur5", log)
+    try:
+        started = world.spin(STARTUP_S, lambda: len(world.statuses["ur5_0"]) >= 10)
+        assert started, proc.output()[-3000:]
+        world.script_start = time.monotonic()
+        total = sum(s for _, s in PHASES)
+        world.spin(total - 1.0)
+        world.publish_goal("ur5_0", [10.0] * 6)  # outside the joint limits: rejected
+        world.spin(1.0)
+        alive = proc.proc.poll() is None
+        code = proc.stop(20.0)
+    finally:
+        proc.stop(5.0)
+        world.close()  # before the next module fixture starts a runtime of its own
+    assert alive, proc.output()[-3000:]
+    return world, [world.script_start], proc.output(), code if code is not None else -9
+
+
+def test_faulty_peer_never_crashes_the_planner(peer_run: tuple) -> None:
+    world, _, output, code = peer_run
+    assert code == 0, output[-3000:]
+    assert "Traceback" not in output
+    statuses = world.statuses["ur5_0"]
+    commands = np.array([s.command for s in statuses])
+    assert np.all(np.isfinite(commands)) and np.all(np.abs(commands) <= 0.5 + 1e-12)
+
+
+@pytest.mark.parametrize("phase", ["nan", "short", "silent"])
+def test_bad_or_silent_peer_is_never_planned_against(peer_run: tuple, phase: str) -> None:
+    """After the first bad message (or peer_timeout of silence) the arm holds still (the
+    default ``stale_policy``), or takes the fail-safe while a solve is late."""
+    world, (t0,), _, _ = peer_run
+    begin = t0 + sum(s for _, s in PHASES[: [n for n, _ in PHASES].index(phase)])
+    seconds = dict(PHASES)[phase]
+    settle = 0.6 if phase == "silent" else 0.35  # peer_timeout, one tick and transport
+    window = _window(world.statuses["ur5_0"], begin + settle, begin + seconds)
+    assert len(window) >= 10 * (seconds - settle), len(window)
+    expected = {"stale_peer", "untrusted_peer", "deadline_missed"}
+    assert {s.message for s in window} <= expected, [s.message for s in window]
+    reported = [s for s in window if s.message != "deadline_missed"]
+    key = "stale_peers" if phase == "silent" else "untrusted_peers"
+    assert reported and all("ur5_1" in s.values[key] for s in reported)
+    assert all(s.level == msgs.DiagnosticStatus.WARN for s in reported)
+    assert all(s.values["hold"] == "true" and not np.any(s.command) for s in reported)
+
+
+def test_rejections_and_jumps_are_counted(peer_run: tuple) -> None:
+    world, _, _, _ = peer_run
+    last = world.statuses["ur5_0"][-1].values
+    assert int(last["rejected_states"]) >= 50  # 2 × 1.2 s of garbage at 50 Hz
+    assert int(last["state_jumps"]) >= 2  # into the teleport and back
+
+
+def test_teleport_untrusts_the_peer(peer_run: tuple) -> None:
+    world, (t0,), _, _ = peer_run
+    names = [n for n, _ in PHASES]
+    begin = t0 + sum(s for _, s in PHASES[: names.index("teleport")])
+    window = _window(world.statuses["ur5_0"], begin, begin + 1.0)
+    assert any(s.message == "untrusted_peer" for s in window), [s.message for s in window]
+
+
+def test_normal_planning_resumes_after_each_fault(peer_run: tuple) -> None:
+    world, (t0,), _, _ = peer_run
+    start = 0.0
+    for k, (name, seconds) in enumerate(PHASES):
+        if name == "normal" and k > 0:
+            window = _window(world.statuses["ur5_0"], t0 + start + 0.7, t0 + start + seconds)
+            planned = [s for s in window if s.message in PLANNED]
+            assert len(planned) >= 0.5 * len(window) > 0, (k, [s.message for s in window])
+        start += seconds
+
+
+def test_faults_are_logged_once_per_cause_and_interval(peer_run: tuple) -> None:
+    _, _, output, _ = peer_run
+    rejected = _warnings(output, r"joint state of ur5_1 rejected")
+    jumped = _warnings(output, r"joint state of ur5_1 jumped")
+    stale = _warnings(output, r"peers stale")
+    assert rejected and jumped and stale, output[-3000:]
+    assert len(rejected) <= 6  # throttled: ≤ 1 per 2 s, not 1 per message
+    assert "rejected goal" in output and "joint limits" in output
+
+
+# ---------------------------------------------------------------------------- solver faults
+SOLVER_FAULTS = {"ur5_0": "raise@20", "ur5_1": "hang@20", "ur5_2": "slow:0.06@20"}
+
+
+@pytest.fixture(scope="module")
+def solver_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[World, dict, dict]:
+    """Three planners of triple_ur5, each with its solver failing differently after 20 calls."""
+    cell = load_cell("triple_ur5")
+    start, goals = _scenario(cell)
+    world = World(cell, start, goals)
+    out = tmp_path_factory.mktemp("solver")
+    procs = {
+        a: _planner(a, "triple_ur5", out / f"{a}.log", fault_injection=f, allow_unmodelled=True)
+        for a, f in SOLVER_FAULTS.items()
+    }
+    try:
+        started = world.spin(
+            STARTUP_S, lambda: all(len(world.statuses[a]) >= 60 for a in SOLVER_FAULTS)
+        )
+        assert started, {a: p.output()[-2000:] for a, p in procs.items()}
+        world.spin(4.0)
+        alive = {a: p.proc.poll() is None for a, p in procs.items()}
+        codes = {a: p.stop(20.0) for a, p in procs.items()}
+    finally:
+        for p in procs.values():
+            p.stop(5.0)
+        world.close()
+    outputs = {a: p.output() for a, p in procs.items()}
+    assert all(alive.values()), outputs
+    return world, codes, outputs
+
+
+def _after_fault(world: World, arm_id: str) -> list[Status]:
+    """Statuses well after the fault began (status k comes from plan call k − 1; the fault
+    starts at call 20, later when ticks are missed)."""
+    return world.statuses[arm_id][40:]
+
+
+def test_solver_faults_never_end_a_node(solver_run: tuple) -> None:
+    world, codes, outputs = solver_run
+    for a in SOLVER_FAULTS:
+        assert codes[a] == 0, outputs[a][-3000:]
+        assert "fault_injection" in outputs[a] and "is ON" in outputs[a]
+        after = _after_fault(world, a)
+        assert len(after) >= 60, (a, len(after))  # still publishing every tick
+        periods = np.diff([s.t for s in after])
+        assert np.median(periods) < 0.06, (a, np.median(periods))
+        assert all(s.values["fault_injection"] == SOLVER_FAULTS[a] for s in after)
+
+
+def test_a_raising_solver_gets_the_fail_safe_and_is_counted(solver_run: tuple) -> None:
+    world, _, outputs = solver_run
+    after = _after_fault(world, "ur5_0")
+    failed = [s for s in after if s.message == "failed"]
+    assert len(failed) >= 0.8 * len(after)
+    assert all(s.level == msgs.DiagnosticStatus.ERROR for s in failed)
+    assert all("Injected" in s.values["error"] for s in failed)
+    for s in failed:  # the fail-safe ū·sign(∂V/∂q) (or zero while it is unknown)
+        assert set(np.round(np.abs(s.command), 12)) <= {0.0, 0.5}
+    last = after[-1].values
+    assert int(last["solver_errors"]) >= len(failed)
+    assert 1 <= len(_warnings(outputs["ur5_0"], "solver failed")) <= 5
+
+
+def test_a_hung_solver_ends_in_holding_still(solver_run: tuple) -> None:
+    world, _, outputs = solver_run
+    after = _after_fault(world, "ur5_1")
+    assert all(s.message == "deadline_missed" for s in after)
+    held = after[10:]  # > peer_timeout (0.25 s) after the hang began: zero velocity
+    assert held and all(s.values["hold"] == "true" and not np.any(s.command) for s in held)
+    misses = [int(s.values["deadline_misses"]) for s in after]
+    ticks = [int(s.values["ticks"]) for s in after]
+    assert misses[-1] - misses[0] == ticks[-1] - ticks[0]  # every tick counted
+    assert 1 <= len(_warnings(outputs["ur5_1"], "missed its deadline")) <= 5
+
+
+def test_a_slow_solver_misses_every_deadline_safely(solver_run: tuple) -> None:
+    world, _, _ = solver_run
+    after = _after_fault(world, "ur5_2")
+    assert sum(s.message == "deadline_missed" for s in after) >= 0.9 * len(after)
+    assert all(s.values["fail_safe"] == "true" for s in after if s.message == "deadline_missed")
+    assert int(after[-1].values["deadline_misses"]) >= 0.9 * len(after)
