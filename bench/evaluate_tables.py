@@ -106,10 +106,36 @@ def _render(setup: str, runs: list[RowRun], out: Path) -> list[Path]:
     return final
 
 
+def _merge(previous: Path, summary: dict[str, Any]) -> dict[str, Any]:
+    """``summary``'s rows in place of the same rows of an earlier run (``--only-rows``)."""
+    if not previous.exists():
+        return summary
+    old = json.loads(previous.read_text())
+    fresh = {r["row"]: r for r in summary["rows"]}
+    merged = dict(old)
+    merged["rows"] = [fresh.pop(r["row"], r) for r in old["rows"]] + list(fresh.values())
+    rerun = {"rows": [r["row"] for r in summary["rows"]]}
+    rerun.update({k: summary[k] for k in ("load_average_at_start", "wall_seconds", "workers")})
+    merged["rerun"] = [*old.get("rerun", []), rerun]
+    return merged
+
+
+def _table_text(summary: dict[str, Any]) -> str:
+    text = markdown_table(summary)
+    for r in summary.get("rerun", []):
+        text += (
+            f"\nRows {', '.join(r['rows'])} were run again afterwards on the same scenarios "
+            f"({r['wall_seconds']:.0f} s wall); the others are from the first run.\n"
+        )
+    return text
+
+
 def run_table(table: str, args: argparse.Namespace) -> list[dict[str, Any]]:
     summaries = []
     for setup_name, all_rows in TABLES[table]:
         rows = [r for r in all_rows if r not in args.skip_rows]
+        if args.only_rows:
+            rows = [r for r in rows if r in args.only_rows]
         setup = get_setup(setup_name)
         cell = setup.load_cell()
         for row in rows:
@@ -140,6 +166,8 @@ def run_table(table: str, args: argparse.Namespace) -> list[dict[str, Any]]:
                 "logs": str(config.out_dir),
             },
         )
+        if args.only_rows:
+            summary = _merge(args.out / f"table_{table}_{setup_name}.json", summary)
         write_summary(args.out, summary, stem=f"table_{table}_{setup_name}")
         if not args.no_render:
             for p in _render(setup_name, runs, args.out):
@@ -157,12 +185,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--value-model", action="append", default=[], metavar="[KIND=]SOURCE")
     parser.add_argument("--backend", default="auto", choices=("auto", "compiled", "vm"))
     parser.add_argument("--skip-rows", default="", help="comma-separated rows to leave out")
+    parser.add_argument(
+        "--only-rows",
+        default="",
+        help="comma-separated rows to run again; the other rows are kept from the table's "
+        "earlier results in --out (the summary lists what was rerun)",
+    )
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--logs", type=Path, default=cache_dir() / "eval_logs")
     parser.add_argument("--no-render", action="store_true")
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
     args.skip_rows = {r for r in args.skip_rows.split(",") if r}
+    args.only_rows = {r for r in args.only_rows.split(",") if r}
     tables = [t.strip() for t in args.tables.split(",") if t.strip()]
     unknown = [t for t in tables if t not in TABLES]
     if unknown:
@@ -171,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         for table in tables:
             summaries = run_table(table, args)
-            text = f"## Table {table}\n\n" + "\n".join(markdown_table(s) for s in summaries)
+            text = f"## Table {table}\n\n" + "\n".join(_table_text(s) for s in summaries)
             (args.out / f"table_{table}.md").write_text(text)
             (args.out / f"table_{table}.json").write_text(
                 json.dumps({"table": table, "setups": summaries}, indent=1) + "\n"
