@@ -14,7 +14,6 @@ from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.planners import SHIPPED_PAIRS, ModelRegistry, build_planners
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr.networks import NetworkSettings
-from nehmo_core.hjr.train import shipped_value_path
 from nehmo_core.planning.baselines import NaivePlanner, TrajectoryTracker, retime
 from nehmo_core.planning.chomp import plan_chomp
 from nehmo_core.planning.factory import centralized_trackers, make_planner
@@ -182,10 +181,6 @@ class _Telemetry:
         return result
 
 
-@pytest.mark.skipif(
-    not all(shipped_value_path(p).exists() for p in ("ur5_kinova", "kinova_ur5")),
-    reason="UR5-Kinova value functions not shipped",
-)
 def test_nehmo_on_both_arms_of_the_ur5_kinova_cell() -> None:
     """Table IV's NeHMO/NeHMO row: each arm plans with its own game (kinova_ur5 for the Kinova)."""
     cell = load_cell("ur5_kinova")

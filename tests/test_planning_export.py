@@ -13,7 +13,7 @@ from nehmo_core.hjr.arm_pairs import SwappedBoundary
 from nehmo_core.hjr.casadi_export import value_functions
 from nehmo_core.hjr.networks import NetworkSettings, ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import ArmPairSystem, JointInterval
-from nehmo_core.hjr.train import load_value_function, shipped_value_path
+from nehmo_core.hjr.train import load_value_function
 from nehmo_core.planning import codegen
 from nehmo_core.planning.codegen import compile_function
 from nehmo_core.planning.synthetic import proxy_distance_model, random_value_function
@@ -67,9 +67,6 @@ def test_value_export_matches_torch(pair: str, variant: str, scaling: str, backe
         np.testing.assert_allclose([float(value(tau, xi)) for xi in x[:5]], ref_v[:5], atol=1e-9)
 
 
-@pytest.mark.skipif(
-    not shipped_value_path("kinova_ur5").exists(), reason="kinova_ur5 weights not shipped"
-)
 @pytest.mark.parametrize("backend", ["vm", "compiled"])
 def test_swapped_boundary_export_matches_torch(backend: str) -> None:
     """kinova_ur5's l(x) is the ur5_kinova distance with the joint vectors swapped."""

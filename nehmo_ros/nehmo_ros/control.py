@@ -506,10 +506,16 @@ class ArmController:
             return self._hold("no_goal")
         if obs.missing:
             return self._hold("waiting_for_peers")
-        fallback = self._fail_safe_velocity(obs.q_self, obs.peers)
+        doubtful = obs.stale or obs.untrusted
+        if doubtful and self.settings.stale_policy == "hold":
+            # hold, and let a late solve of this tick fall back to holding too: never steer by
+            # a stale or untrusted peer state
+            fallback = _zeros(self.robot.dof)
+        else:
+            fallback = self._fail_safe_velocity(obs.q_self, obs.peers)
         with self._fallback_lock:
             self._fallback = (obs.tick, fallback)
-        if obs.stale or obs.untrusted:
+        if doubtful:
             status = "stale_peer" if obs.stale else "untrusted_peer"
             if self.settings.stale_policy == "hold":
                 return self._hold(status)

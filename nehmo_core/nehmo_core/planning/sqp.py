@@ -113,6 +113,9 @@ def solve_sqp(
             return SolveResult(y, "timeout", iteration, c)
         grad = 2.0 * (problem.error0 + y)
         step = qp_step(B, grad, c, J, -ymax - y, ymax - y)
+        if not step.feasible and step.flag != -1:  # B lost definiteness to rounding: the cost's 2I
+            B = 2.0 * np.eye(n)
+            step = qp_step(B, grad, c, J, -ymax - y, ymax - y)
         if step.flag == -1:
             return SolveResult(y, "infeasible", iteration, c)
         if not step.feasible:
