@@ -17,8 +17,7 @@ stale peers end in the fail-safe or a hold, and every tick's status says which.
 Parameters (validated at start; a bad one stops the node with one line naming it, the rule and
 the value): ``arm_id`` (required), ``cell`` (required: shipped name or YAML path), ``planner``
 (nehmo | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless), ``model`` (shipped |
-synthetic |
-path), ``rate`` [Hz], ``t_plan``, ``t_safe`` [s], ``epsilon`` [m], ``u_max``, ``d_max``
+synthetic | path), ``rate`` [Hz], ``t_plan``, ``t_safe`` [s], ``epsilon`` [m], ``u_max``, ``d_max``
 [rad/s], ``solver`` (sqp | ipopt), ``deadline`` [s] (0: 75 % of the period), ``peer_timeout``
 [s], ``stale_policy`` (hold | fail_safe: what a stale or untrusted peer triggers),
 ``jump_margin`` [rad] (slack of the test that flags joint states moving faster than ``d_max``;
