@@ -60,8 +60,8 @@ LABEL = {"air3d": "Air3D", "two_link": "Simple arm (two-link)"}
 SHORTFALL = {
     "two_link": (
         "  Why: the `cpu` preset was tuned on Air3D only. The two-link pair trains at ~25–35k "
-        "samples/s here (its segment-distance boundary and gradient are evaluated every step), "
-        "so one 40M run takes ~25 min and no two-link tuning fitted in the session. Its error "
+        "samples/s on one thread (its segment-distance boundary and gradient are evaluated every step), "
+        "so one 40M run takes ~25 min and no two-link tuning has been run yet. Its error "
         "grows with τ (the PDE residual left at the end of training integrates over the "
         "horizon); at τ = 0.5 s, where the authors validate the two-link pair, it is under the "
         "bar. Next tries, from the Air3D screening (`hjr_tuning.md`): batch 250 (cut the 4M "
@@ -166,7 +166,7 @@ def markdown(summary: dict[str, Any], settings: TrainSettings, preset: str) -> s
         "# Table I: HJR validation error against data usage",
         "",
         "Mean |V − V_gt| over the hj_reachability grid at τ = T (Air3D 51³, T = 1.1 s; two-link "
-        "41⁴, T = 0.6 s), physical value units. Ours (this machine, 1 CPU thread) / paper "
+        "41⁴, T = 0.6 s), physical value units. Ours (1 CPU thread, x86_64) / paper "
         "(3 seeds, GPU). `·` = not run yet; `-` = not in the protocol.",
         "",
         "| system | variant | " + " | ".join(labels) + " |",
@@ -224,7 +224,7 @@ def markdown(summary: dict[str, Any], settings: TrainSettings, preset: str) -> s
         f"steps, curriculum over {settings.curriculum_fraction:.3g} of the rest, boundary share "
         f"{settings.boundary_fraction:.3g}, Dirichlet weight {settings.dirichlet_weight:g}. "
         "Budget = states drawn, pretraining included. Wall times are single-thread training "
-        "under `nice -n 10` on a 2-core machine shared with other training jobs, so they are "
+        "under `nice -n 10` on a 2-core CPU shared with other training jobs, so they are "
         "upper bounds. How these settings were chosen: `hjr_tuning.md`.",
         "",
         f"Machine: {platform.machine()}, torch {torch.__version__}.",

@@ -28,7 +28,7 @@ from nehmo_ros.orchestrate import Process, node_command
 
 #: What a status says when the planner itself ran on the tick's observations.
 PLANNED = {"optimal", "naive", "unconstrained", "infeasible", "iteration_limit", "timeout"}
-STARTUP_S = 240.0  # loaded 2-core machines start node processes slowly
+STARTUP_S = 240.0  # a CPU-starved host starts node processes slowly
 
 Script = Callable[[float], "tuple[list[str], list[float]] | str | None"]
 

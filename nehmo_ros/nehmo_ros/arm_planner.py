@@ -81,7 +81,7 @@ DEFAULTS: dict[str, Any] = {
 #: Seconds between two WARN lines of one cause.
 WARN_EVERY = 2.0
 #: History of the command and status publishers (reliable, keep last): 2 s at 25 Hz, so a
-#: recorder that stalls for up to 2 s on a loaded machine loses nothing.
+#: recorder that stalls for up to 2 s (CPU starved) loses nothing.
 HISTORY = 50
 
 

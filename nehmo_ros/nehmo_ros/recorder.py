@@ -57,8 +57,8 @@ STAMP_SOURCES = ("header", "receive")
 STAMPED_TYPES = (JOINT_STATE_TYPE, COLLISIONS_TYPE, CLOCK_TYPE)
 
 LATCHED = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
-#: Reader history per topic: 10 s of 100 Hz joint states, so a recorder that stalls (a loaded
-#: machine) catches up without evicting anything; publishers keep 2 s (bridge, planners).
+#: Reader history per topic: 10 s of 100 Hz joint states, so a recorder that stalls (CPU
+#: starved) catches up without evicting anything; publishers keep 2 s (bridge, planners).
 RECORDING = ros.QoSProfile(depth=1000)
 
 

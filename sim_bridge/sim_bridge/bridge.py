@@ -98,7 +98,7 @@ DEFAULTS: dict[str, Any] = {
 #: Goals and the scenario are latched (transient local): late subscribers still get them.
 LATCHED = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
 #: History of the streaming publishers (reliable, keep last): 2 s at 100 Hz, so a reliable
-#: subscriber (the recorder) that stalls for up to 2 s on a loaded machine loses nothing.
+#: subscriber (the recorder) that stalls for up to 2 s (CPU starved) loses nothing.
 HISTORY = 200
 
 
