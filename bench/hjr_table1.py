@@ -60,9 +60,9 @@ LABEL = {"air3d": "Air3D", "two_link": "Simple arm (two-link)"}
 SHORTFALL = {
     "two_link": (
         "  Why: the `cpu` preset was tuned on Air3D only. The two-link pair trains at ~25–35k "
-        "samples/s on one thread (its segment-distance boundary and gradient are evaluated every step), "
-        "so one 40M run takes ~25 min and no two-link tuning has been run yet. Its error "
-        "grows with τ (the PDE residual left at the end of training integrates over the "
+        "samples/s on one thread (its segment-distance boundary and gradient are evaluated "
+        "every step), so one 40M run takes ~25 min and no two-link tuning has been run yet. "
+        "Its error grows with τ (the PDE residual left at the end of training integrates over the "
         "horizon); at τ = 0.5 s, where the authors validate the two-link pair, it is under the "
         "bar. Next tries, from the Air3D screening (`hjr_tuning.md`): batch 250 (cut the 4M "
         "Air3D error from 0.021 to 0.0135) and width 128 for the more intricate 4-D boundary."
