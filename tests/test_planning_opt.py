@@ -221,6 +221,25 @@ def test_fail_safe_fires_on_a_missed_deadline(model, value_function) -> None:
     np.testing.assert_array_equal(result.velocity, 0.5 * np.sign(grad[:6]))
 
 
+def test_fail_safe_deadband_stills_only_the_joints_that_barely_change_v(
+    model, value_function
+) -> None:
+    settings = PlannerSettings(fail_safe_deadband=0.3)
+    planner = NehmoPlanner(CELL, OWN, [model], settings, solver=_Failing())
+    q1, q2, goal = _near_contact(model, 6, 1)[0]
+    result = planner.plan(q1, {PEER: q2}, goal)
+    _, grad = value_function.value_and_gradient(0.1, np.concatenate([q1, q2]))
+    g = grad[:6]
+    dead = np.abs(g) < 0.3 * np.abs(g).max()
+    assert dead.any() and not dead.all()
+    np.testing.assert_array_equal(result.velocity[dead], 0.0)
+    np.testing.assert_array_equal(result.velocity[~dead], 0.5 * np.sign(g[~dead]))
+    # the first-order rate of V under the deadband fail-safe stays positive (it still evades)
+    assert float(g @ result.velocity) > 0.0
+    with pytest.raises(InvalidValueError, match="fail_safe_deadband"):
+        PlannerSettings(fail_safe_deadband=1.0)
+
+
 def test_fail_safe_picks_the_most_critical_of_several_peers(model) -> None:
     cell = load_cell("triple_ur5")
     planner = NehmoPlanner(cell, "ur5_0", [model], solver=_Failing())

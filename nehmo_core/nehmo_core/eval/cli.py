@@ -58,6 +58,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--deadline", type=float, help="planner deadline [s] (default: one 25 Hz tick, 0.04)"
     )
+    parser.add_argument(
+        "--fail-safe-deadband",
+        type=float,
+        help="fail-safe joints with |dV/dq_j| below this share of the largest stay still "
+        "(default 0: the paper's fail-safe)",
+    )
     parser.add_argument("--render", action="store_true", help="render each row's first episode")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -96,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
     planner_settings = PlannerSettings()
     if args.deadline is not None:
         planner_settings = planner_settings.replace(deadline=args.deadline)
+    if args.fail_safe_deadband is not None:
+        planner_settings = planner_settings.replace(fail_safe_deadband=args.fail_safe_deadband)
     config = BatchConfig(
         setup=args.setup,
         out_dir=args.out,

@@ -150,7 +150,13 @@ class NehmoPlanner:
 
     def _fail_safe(self, now: _Peers) -> np.ndarray:
         critical = int(np.argmin(now.values))
-        return self.settings.u_max * np.sign(now.grads[critical][: self.robot.dof])
+        g = now.grads[critical][: self.robot.dof]
+        u = self.settings.u_max * np.sign(g)
+        if self.settings.fail_safe_deadband > 0.0:
+            # joints that barely change V need not sweep at full speed (they cost V at most
+            # ū·Σ|g_j| over the dead joints, and may fold the arm into itself)
+            u[np.abs(g) < self.settings.fail_safe_deadband * np.abs(g).max()] = 0.0
+        return u
 
     def fail_safe(self, q_self: ArrayLike, peers: Mapping[str, ArrayLike]) -> np.ndarray:
         """The fail-safe command (dof,) [rad/s] at this state: ``ū·sign(∂V/∂q¹)`` of the most

@@ -37,6 +37,9 @@ class PlannerSettings:
     solver: str = "sqp"
     deadline: float = 0.04  # a solve longer than this (one 25 Hz tick) triggers the fail-safe
     reach_margin: float = 0.3  # peers farther than reach_own + reach_peer + margin are skipped
+    # fail-safe joints whose |∂V/∂q_j| is below this share of the largest stay still (0: every
+    # joint at full speed, the paper's fail-safe)
+    fail_safe_deadband: float = 0.0
     backend: str = "auto"  # evaluation of V, ∇V: generated C ("compiled") or CasADi's "vm"
     # SQP
     sqp_max_iter: int = 30
@@ -51,6 +54,10 @@ class PlannerSettings:
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))
         if not self.t_plan < self.t_safe:
             raise InvalidValueError("t_plan", f"must be < t_safe ({self.t_safe})", self.t_plan)
+        if not 0.0 <= self.fail_safe_deadband < 1.0:
+            raise InvalidValueError(
+                "fail_safe_deadband", "must lie in [0, 1)", self.fail_safe_deadband
+            )
         if not self.reach_margin >= 0:
             raise InvalidValueError("reach_margin", "must be >= 0", self.reach_margin)
         for name in ("sqp_max_iter", "ipopt_max_iter"):
