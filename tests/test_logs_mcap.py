@@ -32,13 +32,13 @@ from nehmo_core.logs import (
     joint_states_topic,
     read_log,
     read_scenario,
-    recover,
     run_topics,
     serialize,
     status_topic,
     summarize,
     topic_type,
 )
+from nehmo_core.logs.recover import recover
 
 ARMS = ["ur5_0", "ur5_1"]
 SCENARIO = {"cell": "dual_ur5", "seed": 3, "arms": ARMS, "time_limit_s": 20.0}
