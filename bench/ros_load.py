@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import re
 import signal
 import subprocess
@@ -41,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _report import machine_at_end, write_report
 
 from nehmo_core.logs import iter_log, summarize
 from nehmo_core.logs.messages import DiagnosticArray, DiagnosticStatus
@@ -433,16 +433,8 @@ def main() -> int:
     out = Path(args.keep or tempfile.mkdtemp(prefix="ros_load_"))
     out.mkdir(parents=True, exist_ok=True)
     result = run(args, out)
-    load = os.getloadavg()
-    result["machine"] = (
-        f"{platform.machine()}, {os.cpu_count()} cores, load average {load[0]:.1f} at the end,"
-        f" python {platform.python_version()}"
-    )
-    results = Path(args.results)
-    results.mkdir(parents=True, exist_ok=True)
-    (results / "ros_load.json").write_text(json.dumps(result, indent=1) + "\n")
-    (results / "ros_load.md").write_text(markdown(result))
-    print(markdown(result))
+    result["machine"] = machine_at_end()
+    print(write_report(Path(args.results), "ros_load", result, markdown))
     print(f"log and process outputs: {out}")
     return 0
 

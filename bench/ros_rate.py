@@ -15,9 +15,7 @@ arms that reach their goals keep planning (and commanding zero) until the end.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -25,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _report import machine_at_end, write_report
 
 from nehmo_core.logs import iter_log
 from nehmo_core.logs.messages import DiagnosticStatus
@@ -166,15 +165,8 @@ def main() -> int:
     out = Path(args.keep or tempfile.mkdtemp(prefix="ros_rate_"))
     out.mkdir(parents=True, exist_ok=True)
     result = run(args.cell, args.model, args.seconds, out)
-    load = os.getloadavg()
-    result["machine"] = (
-        f"{platform.machine()}, {os.cpu_count()} cores, load average {load[0]:.1f} at the end,"
-        f" python {platform.python_version()}, niceness {os.nice(0)}"
-    )
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "ros_rate.json").write_text(json.dumps(result, indent=1) + "\n")
-    (RESULTS / "ros_rate.md").write_text(markdown(result))
-    print(markdown(result))
+    result["machine"] = machine_at_end(f", niceness {os.nice(0)}")
+    print(write_report(RESULTS, "ros_rate", result, markdown))
     print(f"log and process outputs: {out}")
     return 0
 

@@ -64,9 +64,7 @@ def _feed(c: ArmController, now: float, q0: float, peer: bool = True) -> None:
 
 
 def _wait_idle(c: ArmController, timeout: float = 2.0) -> None:
-    end = time.monotonic() + timeout
-    while c._worker.busy and time.monotonic() < end:
-        time.sleep(0.001)
+    c.wait_idle(timeout)
 
 
 def test_command_of_tick_k_comes_from_the_observation_of_tick_k_minus_1() -> None:

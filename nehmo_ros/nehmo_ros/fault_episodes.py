@@ -43,8 +43,7 @@ from typing import Any
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
-from nehmo_core.eval.episode import EpisodeSettings
-from nehmo_core.eval.metrics import goal_distance
+from nehmo_core.eval.episode import EpisodeSettings, reached
 from nehmo_core.eval.scenario_sets import naive_collides
 from nehmo_core.planning.interface import Planner
 from nehmo_core.planning.settings import PlannerSettings
@@ -147,10 +146,7 @@ def run_fault_episode(
                 pair = sorted({tuple(sorted((c.arm_a, c.arm_b))) for c in step.collisions})
                 break
             q = sim.positions()
-            if all(
-                goal_distance(q[a], scenario.goal[a], cell, a, s.success_norm) < s.success_tolerance
-                for a in cell.arm_ids
-            ):
+            if reached(cell, q, scenario, s):
                 outcome = "success"
                 break
     finally:

@@ -170,9 +170,10 @@ def run_episode(
             sim.close()
 
 
-def _reached(
+def reached(
     cell: Cell, q: Mapping[str, np.ndarray], scenario: Scenario, s: EpisodeSettings
 ) -> bool:
+    """Every arm within the success tolerance of its goal (the episode's success rule)."""
     return all(
         goal_distance(q[a], scenario.goal[a], cell, a, s.success_norm) < s.success_tolerance
         for a in cell.arm_ids
@@ -197,7 +198,7 @@ def _loop(
     rec.tick(0, sim.positions(), hold)
     pending: dict[str, np.ndarray] = {}
     outcome, ticks, collisions = "stuck", 0, []
-    if _reached(cell, sim.positions(), scenario, s):
+    if reached(cell, sim.positions(), scenario, s):
         outcome = "success"
     else:
         for k in range(s.max_ticks):
@@ -224,7 +225,7 @@ def _loop(
                     rec.log.collisions(ticks * period_ns, collisions)
                 outcome = "collision"
                 break
-            if _reached(cell, sim.positions(), scenario, s):
+            if reached(cell, sim.positions(), scenario, s):
                 outcome = "success"
                 break
     return _result(cell, scenario, s, rec, kinds, timed, outcome, ticks, collisions)
