@@ -11,7 +11,10 @@ Value models come from *sources*, given on the command line as ``[KIND=]SOURCE``
   without it serves every Opt kind whose variant it matches.
 * Without a source for a kind, the shipped models of the cell's robot pairs are used
   (:data:`SHIPPED_PAIRS`): in the UR5-Kinova cell, ``ur5_kinova`` for the UR5 and
-  ``kinova_ur5`` (the Kinova-controls game) for the Kinova.
+  ``kinova_ur5`` (the Kinova-controls game) for the Kinova; for two UR5s, ``ur5_ur5`` (bases
+  0.6 m apart) and, where the row's variant is shipped for it, ``ur5_ur5_diag`` (0.849 m, the
+  diagonal neighbours of the five-UR5 cell). Each peer uses the model whose base distance
+  matches (:func:`~nehmo_core.planning.pair_frame.match_pair`).
 
 A row fails to build, naming the missing pair, when an Opt planner has a peer in reach that no
 model covers: such a peer would not be constrained at all.
@@ -33,7 +36,7 @@ from nehmo_core.eval.setups import OPT_KINDS, is_centralized
 from nehmo_core.planning.factory import centralized_trackers, make_planner
 from nehmo_core.planning.interface import Planner
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.pair_frame import inverse_pose
+from nehmo_core.planning.pair_frame import inverse_pose, match_pair, pose_from_matrix, relative_pose
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots.model import Cell
@@ -54,8 +57,14 @@ __all__ = [
 SYNTHETIC = "synthetic"
 _SYNTHETIC_PAIRS = {("ur5", "ur5"): "ur5_ur5", ("ur5", "kinova_gen3_6dof"): "ur5_kinova"}
 """(controlled robot, other robot) → pair with a synthetic stand-in (a learned-distance cell)."""
-SHIPPED_PAIRS = {**_SYNTHETIC_PAIRS, ("kinova_gen3_6dof", "ur5"): "kinova_ur5"}
-"""(controlled robot, other robot) → the shipped value function of that game."""
+SHIPPED_PAIRS: dict[tuple[str, str], tuple[str, ...]] = {
+    ("ur5", "ur5"): ("ur5_ur5", "ur5_ur5_diag"),
+    ("ur5", "kinova_gen3_6dof"): ("ur5_kinova",),
+    ("kinova_gen3_6dof", "ur5"): ("kinova_ur5",),
+}
+"""(controlled robot, other robot) → the shipped value functions of that game, one per base
+distance. The first is required for every Opt kind; the others serve the kinds whose variant
+they ship (a peer at their distance is otherwise reported as unconstrained)."""
 
 
 @dataclass(frozen=True)
@@ -184,7 +193,18 @@ class ModelRegistry:
         general = [s.source for s in self.sources if s.kind is None]
         if general:
             return general
-        return [SHIPPED_PAIRS[p] for p in robot_pairs(cell) if p in SHIPPED_PAIRS]
+        from nehmo_core.hjr.train import SHIPPED_VALUE_FUNCTIONS
+
+        variant = OPT_KINDS[kind]
+        out: list[str] = []
+        for pair in robot_pairs(cell):
+            names = SHIPPED_PAIRS.get(pair, ())
+            out.extend(
+                name
+                for i, name in enumerate(names)
+                if i == 0 or (variant in SHIPPED_VALUE_FUNCTIONS[name] and _cell_uses(name, cell))
+            )
+        return out
 
     def models_for(self, kind: str, cell: Cell) -> list[PairValueModel]:
         """Every pair model the ``kind`` planners of ``cell`` use."""
@@ -258,6 +278,23 @@ class ModelRegistry:
         return [made[p] for p in pairs if p in made]
 
 
+def _cell_uses(pair: str, cell: Cell) -> bool:
+    """Whether some (own, peer) pair of ``cell`` maps onto the shipped pair model ``pair``."""
+    from nehmo_core.geometry.distance_data import pair_cell
+
+    model_cell, a, b = pair_cell(pair)
+    arm1, arm2 = model_cell.arm(a), model_cell.arm(b)
+    model = [
+        (arm1.robot.name, arm2.robot.name, pose_from_matrix(relative_pose(arm1.base, arm2.base)))
+    ]
+    return any(
+        match_pair(own, peer, model) is not None
+        for own in cell.arms
+        for peer in cell.arms
+        if own.arm_id != peer.arm_id
+    )
+
+
 def unmodelled_peers(planners: Mapping[str, Planner]) -> dict[str, list[str]]:
     """Peers in reach that each Opt planner does not constrain (no pair model fits)."""
     return {
@@ -283,7 +320,7 @@ def _missing_models(
     own = cell.arm(arm_id).robot.name
     need = sorted({(own, cell.arm(p).robot.name) for p in peers})
     loaded = [f"{m.name} ({m.robot1}, {m.robot2})" for m in models]
-    shipped = [f"{name} {pair}" for pair, name in SHIPPED_PAIRS.items()]
+    shipped = [f"{name} {pair}" for pair, names in SHIPPED_PAIRS.items() for name in names]
     return NehmoError(
         f"arm {arm_id!r} ({kind}) has peers {list(peers)} that no value model covers; "
         f"it needs pair models {need} (robot1 = the planning arm). Sources used: "

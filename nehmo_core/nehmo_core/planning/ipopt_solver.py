@@ -1,7 +1,8 @@
 """IPOPT through CasADi on Opt: the authors' solver and settings, kept as the reference.
 
 Decision ``u`` [rad/s] (as in the paper, not the step ``y``), cost ``‖q¹ + t_plan·u − q_goal‖²``,
-one constraint ``V_i(t_safe, ·) ≥ ε`` per constrained peer, limited-memory Hessian, ``tol`` and
+one constraint ``V_i(t_safe, ·) ≥ ε`` per constrained peer (then the self-clearance rows, if
+any), limited-memory Hessian, ``tol`` and
 ``max_iter`` from the settings (1e-3 and 30 by default), started at the warm start. The value
 functions enter as CasADi graphs (``PairValueModel.value``). Any IPOPT status other than
 success is a failure (the planner then uses the fail-safe).
@@ -48,11 +49,15 @@ class IpoptSolver:
         n1: int,
         t_plan: float,
         t_safe: float,
+        n_linear: int,
     ) -> ca.Function:
         u = ca.MX.sym("u", n1)
         e0 = ca.MX.sym("e0", n1)
         params = [e0]
         g = []
+        if n_linear:  # self-clearance rows A·(t_plan·u) ≥ b; A enters as a parameter
+            A = ca.MX.sym("A", n_linear, n1)
+            params.append(ca.vec(A))
         for index, count in layout:
             model = models[index]
             states = ca.MX.sym(f"x{index}", model.state_dim, count)
@@ -60,6 +65,8 @@ class IpoptSolver:
             step = ca.vertcat(t_plan * u, ca.DM.zeros(model.n2))
             for k in range(count):
                 g.append(model.value(t_safe, states[:, k] + step))
+        if n_linear:  # after the V rows, as in Constraints.evaluate
+            g.append(ca.mtimes(A, t_plan * u))
         nlp: dict[str, Any] = {
             "x": u,
             "p": ca.vertcat(*params),
@@ -76,18 +83,26 @@ class IpoptSolver:
         models = cons.models
         layout = tuple((index, len(states)) for index, states in cons.groups)
         n1 = len(problem.error0)
-        key = (tuple(id(m) for m in models), layout, n1, problem.t_plan, cons.t_safe)
+        linear = cons.linear
+        n_linear = linear.count if linear is not None else 0
+        key = (tuple(id(m) for m in models), layout, n1, problem.t_plan, cons.t_safe, n_linear)
         solver = self._solvers.get(key)
         if solver is None:
-            solver = self._build(models, layout, n1, problem.t_plan, cons.t_safe)
+            solver = self._build(models, layout, n1, problem.t_plan, cons.t_safe, n_linear)
             self._solvers[key] = solver
-        params = np.concatenate([problem.error0, *[s.T.ravel() for _, s in cons.groups]])
+        parts = [problem.error0]
+        lower = [np.full(sum(count for _, count in layout), cons.epsilon)]
+        if linear is not None and n_linear:
+            parts.append(linear.A.T.ravel())  # column-major, as ca.vec
+            lower.append(linear.b)
+        parts.extend(s.T.ravel() for _, s in cons.groups)
+        params, lbg = np.concatenate(parts), np.concatenate(lower)
         u_max = problem.y_max / problem.t_plan
         u0 = np.clip(np.asarray(y_start) / problem.t_plan, -u_max, u_max)
-        out = solver(x0=u0, p=params, lbx=-u_max, ubx=u_max, lbg=cons.epsilon, ubg=np.inf)
+        out = solver(x0=u0, p=params, lbx=-u_max, ubx=u_max, lbg=lbg, ubg=np.inf)
         stats = solver.stats()
         y = np.asarray(out["x"]).ravel() * problem.t_plan
-        c = np.asarray(out["g"]).ravel() - cons.epsilon
+        c = np.asarray(out["g"]).ravel() - lbg
         iterations = int(stats.get("iter_count", 0))
         if time.perf_counter() > deadline:
             return SolveResult(y, "timeout", iterations, c)

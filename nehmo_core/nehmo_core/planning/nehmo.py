@@ -25,6 +25,7 @@ from nehmo_core.planning.interface import PlanResult, Telemetry, check_peers, go
 from nehmo_core.planning.ipopt_solver import IpoptSolver
 from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
 from nehmo_core.planning.pair_frame import PairMapping, arm_reach, match_pair
+from nehmo_core.planning.self_clearance import SelfClearance, SelfClearanceRows, project_step
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.sqp import SolveResult, solve_sqp
 from nehmo_core.planning.value_model import PairValueModel
@@ -114,6 +115,22 @@ class NehmoPlanner:
         self.peers_skipped = tuple(skipped)
         self.peers_unmodelled = tuple(unmodelled)
         self._warm = np.zeros(self.robot.dof)
+        s = self.settings
+        self.self_clearance = (
+            SelfClearance(self.robot, s.self_influence, s.self_safety, s.self_gain)
+            if s.self_clearance
+            else None
+        )
+
+    def _self_rows(self, q: np.ndarray) -> SelfClearanceRows | None:
+        return self.self_clearance.rows(q) if self.self_clearance is not None else None
+
+    def _within_self_clearance(self, u: np.ndarray, rows: SelfClearanceRows | None) -> np.ndarray:
+        """``u`` [rad/s], or the nearest command whose step keeps the self-clearance rows."""
+        if rows is None or rows.count == 0:
+            return u
+        t = self.settings.t_plan
+        return project_step(t * u, rows, t * self.settings.u_max) / t
 
     def reset(self) -> None:
         self._warm = np.zeros(self.robot.dof)
@@ -136,19 +153,24 @@ class NehmoPlanner:
                 values[i], grads[i] = v[k], g[k]
         return _Peers(ids, index, states, values, grads)
 
-    def _problem(self, error0: np.ndarray, now: _Peers) -> OptProblem:
+    def _problem(
+        self, error0: np.ndarray, now: _Peers, self_rows: SelfClearanceRows | None = None
+    ) -> OptProblem:
         s, n1 = self.settings, self.robot.dof
         groups = []
         for m in sorted(set(now.model_index)):
-            rows = [i for i, mi in enumerate(now.model_index) if mi == m]
-            predicted = np.array([now.states[i] for i in rows])
-            peer_grads = np.array([now.grads[i][n1:] for i in rows])
+            members = [i for i, mi in enumerate(now.model_index) if mi == m]
+            predicted = np.array([now.states[i] for i in members])
+            peer_grads = np.array([now.grads[i][n1:] for i in members])
             predicted[:, n1:] += s.t_plan * worst_case_disturbance(peer_grads, s.d_max)
             groups.append((m, predicted))
-        constraints = Constraints(self.models, groups, s.t_safe, s.epsilon)
+        constraints = Constraints(self.models, groups, s.t_safe, s.epsilon, self_rows)
         return OptProblem(error0, s.t_plan * s.u_max, s.t_plan, constraints)
 
-    def _fail_safe(self, now: _Peers) -> np.ndarray:
+    def _fail_safe(self, now: _Peers, rows: SelfClearanceRows | None = None) -> np.ndarray:
+        return self._within_self_clearance(self._hji_fail_safe(now), rows)
+
+    def _hji_fail_safe(self, now: _Peers) -> np.ndarray:
         critical = int(np.argmin(now.values))
         g = now.grads[critical][: self.robot.dof]
         u = self.settings.u_max * np.sign(g)
@@ -160,7 +182,8 @@ class NehmoPlanner:
 
     def fail_safe(self, q_self: ArrayLike, peers: Mapping[str, ArrayLike]) -> np.ndarray:
         """The fail-safe command (dof,) [rad/s] at this state: ``ū·sign(∂V/∂q¹)`` of the most
-        critical constrained peer; zero (hold) when no peer is constrained.
+        critical constrained peer (with self-clearance on, the nearest command that keeps the
+        arm's self-clearance rows); zero (hold) when no peer is constrained.
 
         Cheap (one value-and-gradient evaluation); a ROS node computes it ahead of each solve
         so that a solve that overruns its tick still has a safe command to fall back on.
@@ -170,7 +193,7 @@ class NehmoPlanner:
         others = check_peers(self.cell, self.arm_id, peers)
         if not any(p in others for p in self.pairs):
             return np.zeros(self.robot.dof)
-        return self._fail_safe(self._current(q, others, only_known=True))
+        return self._fail_safe(self._current(q, others, only_known=True), self._self_rows(q))
 
     def plan(
         self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
@@ -191,17 +214,18 @@ class NehmoPlanner:
             "peers_skipped": self.peers_skipped,
             "peers_unmodelled": self.peers_unmodelled,
         }
+        rows = self._self_rows(q)
         if not self.pairs:
             y = np.clip(
                 -error0,
                 -self.settings.t_plan * self.settings.u_max,
                 self.settings.t_plan * self.settings.u_max,
             )
-            u = y / self.settings.t_plan
-            self._warm = y
+            u = self._within_self_clearance(y / self.settings.t_plan, rows)
+            self._warm = u * self.settings.t_plan
             return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
         now = self._current(q, others)
-        problem = self._problem(error0, now)
+        problem = self._problem(error0, now, rows)
         try:
             result = self.solver(problem, self._warm, deadline)
             status = result.status
@@ -214,10 +238,12 @@ class NehmoPlanner:
         if result is not None and result.success and not late:
             u = problem.velocity(result.y)
             self._warm = result.y
-            min_constraint = float(result.constraint.min()) if len(result.constraint) else math.nan
+            n_value = len(now.ids)  # the V rows come first; self-clearance rows follow
+            value_rows = result.constraint[:n_value]
+            min_constraint = float(value_rows.min()) if len(value_rows) else math.nan
             fail_safe = False
         else:
-            u = self._fail_safe(now)
+            u = self._fail_safe(now, rows)
             self._warm = problem.t_plan * u
             min_constraint, fail_safe = math.nan, True
         telemetry = Telemetry(

@@ -5,9 +5,10 @@ In step variables ``y = t_plan·u`` [rad] (the own arm's displacement over the s
     min_y ‖e₀ + y‖²   s.t.  V_i(t_safe, x_i + (y, 0)) ≥ ε  for every constrained peer i,
                             |y_j| ≤ t_plan·ū,
 
-with ``e₀ = q¹ − q_goal`` (continuous joints optionally wrapped) and ``x_i`` the pair state in
-model ``i``'s frame with the peer already moved by its worst case
-``dⁱ = −d̄·sign(∂V/∂qⁱ)`` evaluated at ``τ = t_plan`` from the current state.
+plus, when enabled, the arm's self-clearance rows ``A·y ≥ b`` (linear, see
+:mod:`nehmo_core.planning.self_clearance`); ``e₀ = q¹ − q_goal`` (continuous joints optionally
+wrapped) and ``x_i`` is the pair state in model ``i``'s frame with the peer already moved by its
+worst case ``dⁱ = −d̄·sign(∂V/∂qⁱ)`` evaluated at ``τ = t_plan`` from the current state.
 Solvers return ``u = y / t_plan``.
 """
 
@@ -18,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nehmo_core.planning.self_clearance import SelfClearanceRows
 from nehmo_core.planning.value_model import PairValueModel
 
 __all__ = ["Constraints", "OptProblem", "worst_case_disturbance"]
@@ -36,10 +38,12 @@ class Constraints:
     groups: Sequence[tuple[int, np.ndarray]]  # (model index, base states (k, n)) per model
     t_safe: float
     epsilon: float
+    linear: SelfClearanceRows | None = None  # self-clearance rows A·y ≥ b, after the V rows
 
     @property
     def count(self) -> int:
-        return sum(len(states) for _, states in self.groups)
+        extra = self.linear.count if self.linear is not None else 0
+        return sum(len(states) for _, states in self.groups) + extra
 
     def states(self, y: np.ndarray) -> list[np.ndarray]:
         out = []
@@ -56,6 +60,9 @@ class Constraints:
             v, g = self.models[index].evaluate(self.t_safe, states)
             values.append(v - self.epsilon)
             jacobians.append(g[:, : len(y)])
+        if self.linear is not None and self.linear.count:
+            values.append(self.linear.A @ y - self.linear.b)
+            jacobians.append(self.linear.A)
         if not values:
             return np.zeros(0), np.zeros((0, len(y)))
         return np.concatenate(values), np.concatenate(jacobians)

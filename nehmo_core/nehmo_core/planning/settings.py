@@ -14,7 +14,8 @@ SOLVERS = ("sqp", "ipopt")
 ``ipopt``: IPOPT through CasADi, the authors' setting (the reference)."""
 
 _PRESETS: dict[str, dict[str, Any]] = {
-    "paper": {},
+    "default": {},
+    "paper": {"self_clearance": False},
     "ipopt": {"solver": "ipopt"},
     "wrapped_goal": {"wrap_goal": True},
 }
@@ -40,6 +41,13 @@ class PlannerSettings:
     # fail-safe joints whose |∂V/∂q_j| is below this share of the largest stay still (0: every
     # joint at full speed, the paper's fail-safe)
     fail_safe_deadband: float = 0.0
+    # self-collision velocity dampers on the step and the fail-safe (not in the paper's Opt):
+    # link pairs closer than self_influence [m] may close at most self_gain of their distance
+    # above self_safety [m] per planned step (planning/self_clearance.py)
+    self_clearance: bool = True
+    self_influence: float = 0.10
+    self_safety: float = 0.02
+    self_gain: float = 0.5
     backend: str = "auto"  # evaluation of V, ∇V: generated C ("compiled") or CasADi's "vm"
     # SQP
     sqp_max_iter: int = 30
@@ -58,6 +66,14 @@ class PlannerSettings:
             raise InvalidValueError(
                 "fail_safe_deadband", "must lie in [0, 1)", self.fail_safe_deadband
             )
+        if not self.self_influence > self.self_safety >= 0.0:
+            raise InvalidValueError(
+                "self_influence",
+                f"must be > self_safety ({self.self_safety}) >= 0",
+                self.self_influence,
+            )
+        if not 0.0 < self.self_gain <= 1.0:
+            raise InvalidValueError("self_gain", "must lie in (0, 1]", self.self_gain)
         if not self.reach_margin >= 0:
             raise InvalidValueError("reach_margin", "must be >= 0", self.reach_margin)
         for name in ("sqp_max_iter", "ipopt_max_iter"):
@@ -72,7 +88,8 @@ class PlannerSettings:
 
     @classmethod
     def preset(cls, name: str, **overrides: Any) -> PlannerSettings:
-        """Named settings: ``paper`` (defaults), ``ipopt``, ``wrapped_goal``."""
+        """Named settings: ``default``; ``paper`` (the paper's Opt: no self-clearance rows);
+        ``ipopt``; ``wrapped_goal``."""
         if name not in _PRESETS:
             raise UnknownNameError("planner preset", name, _PRESETS)
         return cls(**{**_PRESETS[name], **overrides})
