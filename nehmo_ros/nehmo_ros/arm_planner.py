@@ -16,14 +16,15 @@ stale peers end in the fail-safe or a hold, and every tick's status says which.
 
 Parameters (validated at start; a bad one stops the node with one line naming it, the rule and
 the value): ``arm_id`` (required), ``cell`` (required: shipped name or YAML path), ``planner``
-(nehmo | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless), ``model`` (shipped |
-synthetic | path), ``rate`` [Hz], ``t_plan``, ``t_safe`` [s], ``epsilon`` [m], ``u_max``, ``d_max``
-[rad/s], ``solver`` (sqp | ipopt), ``deadline`` [s] (0: 75 % of the period), ``peer_timeout``
-[s], ``stale_policy`` (hold | fail_safe: what a stale or untrusted peer triggers),
-``jump_margin`` [rad] (slack of the test that flags joint states moving faster than ``d_max``;
-``.inf``: off), ``allow_unmodelled`` (accept peers in reach that no pair model covers: they are
-then not constrained; default false: an error), ``fault_injection`` (tests only, default ''
-= off: :mod:`nehmo_ros.fault_injection`).
+(nehmo | nehmo_paper | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless), ``model``
+(shipped | synthetic | path), ``rate`` [Hz], ``t_plan``, ``t_safe`` [s], ``epsilon`` [m],
+``u_max``, ``d_max`` [rad/s], ``solver`` (sqp | ipopt), ``self_clearance`` (self-collision
+dampers in Opt and the fail-safe; false: the paper's Opt), ``deadline`` [s] (0: 75 % of the
+period), ``peer_timeout`` [s], ``stale_policy`` (hold | fail_safe: what a stale or untrusted
+peer triggers), ``jump_margin`` [rad] (slack of the test that flags joint states moving faster
+than ``d_max``; ``.inf``: off), ``allow_unmodelled`` (accept peers in reach that no pair model
+covers: they are then not constrained; default false: an error), ``fault_injection`` (tests
+only, default '' = off: :mod:`nehmo_ros.fault_injection`).
 
 Faults are reported, never fatal: rejected or jumping joint states, stale peers, solver
 exceptions and missed deadlines each log a WARN line (at most one per cause every 2 s) and
@@ -71,6 +72,7 @@ DEFAULTS: dict[str, Any] = {
     "u_max": 0.5,
     "d_max": 0.5,
     "solver": "sqp",
+    "self_clearance": True,
     "deadline": 0.0,
     "peer_timeout": 0.25,
     "stale_policy": "hold",
@@ -128,6 +130,7 @@ class ArmPlannerNode:
             d_max=float(p["d_max"]),
             solver=p["solver"],
             deadline=deadline,
+            self_clearance=bool(p["self_clearance"]),
         )
         planner = build_planner(
             p["planner"], self.cell, arm_id, p["model"], settings, bool(p["allow_unmodelled"])

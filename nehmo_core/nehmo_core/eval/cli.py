@@ -34,8 +34,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--planners",
         default="nehmo,naive",
         help="comma-separated rows; a row is a kind for every arm or kinds per arm joined by "
-        "'/' (e.g. nehmo/reckless). Kinds: nehmo, nehmo_no_sym, opt_deepreach, nehmo_wrap, naive, "
-        "reckless, chomp, ompl",
+        "'/' (e.g. nehmo/reckless). Kinds: nehmo, nehmo_paper (no self-clearance rows), "
+        "nehmo_no_sym, opt_deepreach, nehmo_wrap, naive, reckless, chomp, ompl",
     )
     parser.add_argument("--episodes", type=int, default=100, help="scenarios per row")
     parser.add_argument("--seed", type=int, default=0, help="selects the scenario set")
@@ -63,6 +63,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         help="fail-safe joints with |dV/dq_j| below this share of the largest stay still "
         "(default 0: the paper's fail-safe)",
+    )
+    parser.add_argument(
+        "--no-self-clearance",
+        action="store_true",
+        help="the paper's Opt: no self-collision rows in Opt or the fail-safe",
     )
     parser.add_argument("--render", action="store_true", help="render each row's first episode")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
@@ -104,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
         planner_settings = planner_settings.replace(deadline=args.deadline)
     if args.fail_safe_deadband is not None:
         planner_settings = planner_settings.replace(fail_safe_deadband=args.fail_safe_deadband)
+    if args.no_self_clearance:
+        planner_settings = planner_settings.replace(self_clearance=False)
     config = BatchConfig(
         setup=args.setup,
         out_dir=args.out,

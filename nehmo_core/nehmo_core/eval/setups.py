@@ -35,6 +35,7 @@ __all__ = [
 PLANNER_KINDS = DECENTRALIZED + CENTRALIZED
 OPT_KINDS: dict[str, str] = {
     "nehmo": "bc+sym",
+    "nehmo_paper": "bc+sym",
     "nehmo_no_sym": "bc",
     "opt_deepreach": "deepreach",
     "nehmo_wrap": "bc+sym",

@@ -1,7 +1,9 @@
 """Build any planner of the comparison by name (the ablation rows and the baselines).
 
 =================  =====================================================================
-``nehmo``          Opt with the ``bc+sym`` value model (the paper's NeHMO)
+``nehmo``          Opt with the ``bc+sym`` value model (the paper's NeHMO), plus the
+                   self-clearance rows (:mod:`~nehmo_core.planning.self_clearance`)
+``nehmo_paper``    NeHMO exactly as the paper's Opt: no self-clearance rows
 ``nehmo_no_sym``   Opt with the ``bc`` value model (NeHMO w/o Sym)
 ``opt_deepreach``  Opt with the ``deepreach`` value model (Opt + DeepReach)
 ``nehmo_wrap``     NeHMO whose goal cost wraps continuous joints (the paper does not)
@@ -11,9 +13,9 @@
 ``ompl``           centralized RRT-Connect, tracked per arm (:func:`centralized_trackers`)
 =================  =====================================================================
 
-The Opt rows differ only in the pair value models passed in (and ``nehmo_wrap`` in its goal
-cost); which trained model backs
-which row is the caller's choice (the model registry lives with the trained weights).
+The Opt rows differ only in the pair value models passed in (``nehmo_wrap`` also in its goal
+cost, ``nehmo_paper`` in leaving out the self-clearance rows); which trained model backs which
+row is the caller's choice (the model registry lives with the trained weights).
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ from nehmo_core.robots.model import Cell
 
 __all__ = ["CENTRALIZED", "DECENTRALIZED", "centralized_trackers", "make_planner"]
 
-DECENTRALIZED = ("nehmo", "nehmo_no_sym", "opt_deepreach", "nehmo_wrap", "naive", "reckless")
+OPT = ("nehmo", "nehmo_paper", "nehmo_no_sym", "opt_deepreach", "nehmo_wrap")
+DECENTRALIZED = (*OPT, "naive", "reckless")
 CENTRALIZED = ("chomp", "ompl")
 
 
@@ -46,11 +49,13 @@ def make_planner(
     settings: PlannerSettings | None = None,
 ) -> Planner:
     """A per-arm planner of kind ``kind`` (one of :data:`DECENTRALIZED`)."""
-    if kind in ("nehmo", "nehmo_no_sym", "opt_deepreach", "nehmo_wrap"):
+    if kind in OPT:
         if not models:
             raise InvalidValueError("models", f"must hold at least one pair model for {kind!r}", [])
         if kind == "nehmo_wrap":
             settings = (settings or PlannerSettings()).replace(wrap_goal=True)
+        if kind == "nehmo_paper":
+            settings = (settings or PlannerSettings()).replace(self_clearance=False)
         return NehmoPlanner(cell, arm_id, models, settings)
     if kind in ("naive", "reckless"):
         return NaivePlanner(cell, arm_id, settings, reckless=kind == "reckless")

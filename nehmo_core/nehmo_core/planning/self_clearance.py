@@ -135,9 +135,9 @@ class SelfClearance:
             rows = self.rows(q)
             for grad, d, pair in zip(rows.A, rows.distances, rows.pairs, strict=True):
                 norm = float(np.linalg.norm(grad))
-                if d < 0.005 or norm < 0.02:
+                if d < 0.005 or norm < 1e-3:
                     continue
-                dq = 1e-4 * grad / norm
+                dq = 1e-3 * grad / norm
                 ahead = self.distances(q + dq).get(pair)
                 behind = self.distances(q - dq).get(pair)
                 if ahead is None or behind is None:
