@@ -106,14 +106,17 @@ def _render(setup: str, runs: list[RowRun], out: Path) -> list[Path]:
     return final
 
 
-def _merge(previous: Path, summary: dict[str, Any]) -> dict[str, Any]:
-    """``summary``'s rows in place of the same rows of an earlier run (``--only-rows``)."""
+def _merge(previous: Path, summary: dict[str, Any], order: tuple[str, ...]) -> dict[str, Any]:
+    """``summary``'s rows in place of the same rows of an earlier run (``--only-rows``), in the
+    table's row ``order``."""
     if not previous.exists():
         return summary
     old = json.loads(previous.read_text())
     fresh = {r["row"]: r for r in summary["rows"]}
     merged = dict(old)
-    merged["rows"] = [fresh.pop(r["row"], r) for r in old["rows"]] + list(fresh.values())
+    rows = [fresh.pop(r["row"], r) for r in old["rows"]] + list(fresh.values())
+    rank = {row: i for i, row in enumerate(order)}
+    merged["rows"] = sorted(rows, key=lambda r: rank.get(r["row"], len(rank)))
     rerun = {"rows": [r["row"] for r in summary["rows"]]}
     rerun.update({k: summary[k] for k in ("load_average_at_start", "wall_seconds", "workers")})
     merged["rerun"] = [*old.get("rerun", []), rerun]
@@ -122,6 +125,13 @@ def _merge(previous: Path, summary: dict[str, Any]) -> dict[str, Any]:
 
 def _table_text(summary: dict[str, Any]) -> str:
     text = markdown_table(summary)
+    renamed = {k: v for k, v in summary.get("renamed", {}).items() if k != v}
+    if renamed:
+        text += (
+            f"\nRows {', '.join(renamed.values())} are the first run's rows "
+            f"{', '.join(renamed)}: run before `nehmo` gained its self-clearance rows, with the "
+            "same code as `nehmo_paper` now.\n"
+        )
     for r in summary.get("rerun", []):
         text += (
             f"\nRows {', '.join(r['rows'])} were run again afterwards on the same scenarios "
@@ -167,7 +177,7 @@ def run_table(table: str, args: argparse.Namespace) -> list[dict[str, Any]]:
             },
         )
         if args.only_rows:
-            summary = _merge(args.out / f"table_{table}_{setup_name}.json", summary)
+            summary = _merge(args.out / f"table_{table}_{setup_name}.json", summary, all_rows)
         write_summary(args.out, summary, stem=f"table_{table}_{setup_name}")
         if not args.no_render:
             for p in _render(setup_name, runs, args.out):

@@ -4,7 +4,8 @@
 
 Every physics step (``physics_rate``, 100 Hz) it integrates each arm's latest velocity command
 with :class:`nehmo_core.sim.cell_sim.CellSimulator`, checks every arm pair and every arm's
-self-collision exactly, and publishes:
+self-collision exactly (pairs that provably do not touch skip the exact query:
+:mod:`sim_bridge.broadphase`), and publishes:
 
 - ``/<arm>/joint_states`` (sensor_msgs/JointState: positions [rad], the applied velocity
   [rad/s]; one common stamp for all arms per step);
@@ -62,7 +63,6 @@ from nehmo_core.logs.topics import (
     joint_states_topic,
 )
 from nehmo_core.robots.model import Cell
-from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenarios import (
     Scenario,
     load_scenario_set,
@@ -71,6 +71,7 @@ from nehmo_core.sim.scenarios import (
 )
 from nehmo_ros import ros
 from nehmo_ros.node_support import declare_parameters, load_cell_parameter, run_main
+from sim_bridge.broadphase import BroadPhaseSimulator
 
 DEFAULTS: dict[str, Any] = {
     "cell": "",
@@ -202,7 +203,7 @@ class SimBridgeNode:
         )
         kinds = parse_row(p["planners"], self.cell) if p["planners"] else {}
         self.scenario, source = load_episode(self.cell, p)
-        self.sim = CellSimulator(self.cell, substeps=1, self_collision=self.s.self_collision)
+        self.sim = BroadPhaseSimulator(self.cell, substeps=1, self_collision=self.s.self_collision)
         self.sim.reset(self.scenario.start)
         self.metadata = self._metadata(kinds, source)
 

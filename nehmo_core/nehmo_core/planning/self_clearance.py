@@ -82,7 +82,7 @@ class SelfClearance:
         self,
         robot: RobotModel,
         influence: float = 0.10,
-        safety: float = 0.02,
+        safety: float = 0.005,
         gain: float = 0.5,
     ) -> None:
         if not influence > safety >= 0.0:

@@ -46,7 +46,7 @@ class PlannerSettings:
     # above self_safety [m] per planned step (planning/self_clearance.py)
     self_clearance: bool = True
     self_influence: float = 0.10
-    self_safety: float = 0.02
+    self_safety: float = 0.005
     self_gain: float = 0.5
     backend: str = "auto"  # evaluation of V, ∇V: generated C ("compiled") or CasADi's "vm"
     # SQP

@@ -13,8 +13,9 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from nehmo_core.logs.cdr import CDR_LE_HEADER
 from nehmo_core.logs.messages import Clock as ClockMsg
-from nehmo_core.logs.messages import msgtype_of
+from nehmo_core.logs.messages import deserialize, msgtype_of
 from nehmo_ros.embedded.arguments import LOG_LEVELS, parse_ros_args, resolve_overrides
 from nehmo_ros.embedded.clock import Clock, ClockType, ROSClock
 from nehmo_ros.embedded.context import Context, default_context
@@ -158,6 +159,52 @@ class ReentrantCallbackGroup(CallbackGroup):
         return key not in self._running
 
 
+# ------------------------------------------------------------------------------- CDR on DDS
+#: Every DDS sample is a whole number of 4-byte words; XCDR keeps the number of padding bytes
+#: in the two low bits of the encapsulation options (the header's last byte).
+_PAD_MASK = 0x03
+
+
+def write_cdr(writer: Any, data: bytes) -> None:
+    """Publish the CDR bytes ``data`` (header included) on the cyclonedds ``writer``.
+
+    The suite's messages are CDR already (nehmo_core's codec, byte for byte what the IdlStruct
+    mirrors serialize), so they go to the C layer directly, the call ``DataWriter.write`` makes
+    after serializing a sample. The padding to 4 bytes is recorded in the options bits.
+    """
+    from cyclonedds._clayer import ddspy_write
+    from cyclonedds.core import DDSException
+
+    pad = -len(data) % 4
+    if pad:
+        data = data[:3] + bytes([(data[3] & ~_PAD_MASK) | pad]) + data[4:] + bytes(pad)
+    ret = ddspy_write(writer._ref, data)
+    if ret < 0:
+        raise DDSException(ret, f"Occurred while writing sample in {writer!r}")
+
+
+def take_cdr(reader: Any, limit: int) -> list[bytes]:
+    """Take up to ``limit`` samples from the cyclonedds ``reader`` as CDR bytes (header
+    included, without the padding the options bits announce); invalid samples (disposals)
+    are dropped. The same C call as ``DataReader.take``, without its IdlStruct decoding."""
+    from cyclonedds._clayer import ddspy_take
+    from cyclonedds.core import DDSException, InstanceState, SampleState, ViewState
+
+    mask = SampleState.Any | ViewState.Any | InstanceState.Any
+    ret = ddspy_take(reader._ref, mask, limit)
+    if isinstance(ret, int):
+        raise DDSException(ret, f"Occurred while taking data in {reader!r}")
+    out = []
+    for data, info in ret:
+        if not info.valid_data:
+            continue
+        pad = data[3] & _PAD_MASK if len(data) >= len(CDR_LE_HEADER) else 0
+        if pad and len(data) - pad >= len(CDR_LE_HEADER):
+            data = data[:3] + bytes([data[3] & ~_PAD_MASK]) + data[4:-pad]
+        out.append(data)
+    return out
+
+
 # ---------------------------------------------------------------------------- entities
 class Publisher:
     """Publishes one message type on one topic."""
@@ -181,18 +228,28 @@ class Publisher:
         return self.topic_name
 
     def publish(self, msg: Any) -> None:
-        """Send `msg` (an instance of the publisher's type, or its CDR bytes)."""
-        from nehmo_core.logs.messages import deserialize
+        """Send `msg` (an instance of the publisher's type, or its CDR bytes).
+
+        CDR bytes go out as they are (as rclpy sends serialized messages), padded as XCDR
+        requires; they must start with the little-endian plain CDR header.
+        """
         from nehmo_ros.embedded.idl import to_idl
 
         if isinstance(msg, bytes | bytearray | memoryview):
-            msg = deserialize(msg, self._msgtype)
-        elif not isinstance(msg, self.msg_type):
+            data = bytes(msg)
+            if data[:2] != CDR_LE_HEADER[:2] or len(data) < len(CDR_LE_HEADER):
+                raise ValueError(
+                    f"publisher of {self._msgtype} on {self.topic_name!r} was given bytes that "
+                    f"are not little-endian plain CDR (header {data[:4].hex() or 'missing'})"
+                )
+        elif isinstance(msg, self.msg_type):
+            data = to_idl(msg, self._msgtype).serialize()
+        else:
             raise TypeError(
                 f"publisher of {self._msgtype} on {self.topic_name!r} was given "
                 f"{type(msg).__name__}"
             )
-        self._writer.write(to_idl(msg, self._msgtype))
+        write_cdr(self._writer, data)
 
     def get_subscription_count(self) -> int:
         """How many readers match this writer."""
@@ -241,16 +298,11 @@ class Subscription:
 
     def take(self, limit: int = 64) -> list[Any]:
         """Messages waiting in the reader (our dataclasses, or CDR bytes if `raw`)."""
-        from nehmo_ros.embedded.idl import from_idl
-
         if self._reader is None:
             return []
-        samples = self._reader.take(N=limit)
         out = []
-        for sample in samples:
-            if not getattr(sample.sample_info, "valid_data", True):
-                continue
-            out.append(sample.serialize() if self.raw else from_idl(sample, self._msgtype))
+        for data in take_cdr(self._reader, limit):
+            out.append(data if self.raw else deserialize(data, self._msgtype))
         return out
 
     def get_publisher_count(self) -> int:
