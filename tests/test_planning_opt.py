@@ -183,17 +183,23 @@ def test_default_ipopt_settings_agree_with_sqp_within_their_tolerance(model) -> 
 
 
 class _Failing:
-    def __call__(self, problem: OptProblem, y_start: np.ndarray, deadline: float) -> SolveResult:
+    def __call__(
+        self, problem: OptProblem, y_start: np.ndarray, deadline: float, hessian=None
+    ) -> SolveResult:
         return SolveResult(np.zeros(6), "failed", 1, np.zeros(1))
 
 
 class _Crashing:
-    def __call__(self, problem: OptProblem, y_start: np.ndarray, deadline: float) -> SolveResult:
+    def __call__(
+        self, problem: OptProblem, y_start: np.ndarray, deadline: float, hessian=None
+    ) -> SolveResult:
         raise RuntimeError("injected")
 
 
 class _Slow:
-    def __call__(self, problem: OptProblem, y_start: np.ndarray, deadline: float) -> SolveResult:
+    def __call__(
+        self, problem: OptProblem, y_start: np.ndarray, deadline: float, hessian=None
+    ) -> SolveResult:
         time.sleep(0.06)
         return SqpSolver()(problem, y_start, np.inf)
 

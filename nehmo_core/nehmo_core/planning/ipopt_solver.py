@@ -76,9 +76,16 @@ class IpoptSolver:
         return ca.nlpsol("opt_ipopt", "ipopt", nlp, self.options)
 
     def solve(
-        self, problem: OptProblem, y_start: np.ndarray, deadline: float = np.inf
+        self,
+        problem: OptProblem,
+        y_start: np.ndarray,
+        deadline: float = np.inf,
+        hessian: np.ndarray | None = None,
     ) -> SolveResult:
-        """Solve from ``y_start`` (the step; IPOPT starts at ``u = y_start / t_plan``)."""
+        """Solve from ``y_start`` (the step; IPOPT starts at ``u = y_start / t_plan``).
+
+        ``hessian`` is accepted for the solver interface and unused (IPOPT keeps its own
+        limited-memory approximation)."""
         cons = problem.constraints
         models = cons.models
         layout = tuple((index, len(states)) for index, states in cons.groups)

@@ -38,7 +38,11 @@ class OptSolver(Protocol):
     """Solves one Opt problem from a warm start before ``deadline`` (a perf_counter instant)."""
 
     def __call__(
-        self, problem: OptProblem, y_start: np.ndarray, deadline: float
+        self,
+        problem: OptProblem,
+        y_start: np.ndarray,
+        deadline: float,
+        hessian: np.ndarray | None = None,
     ) -> SolveResult: ...
 
 
@@ -49,8 +53,14 @@ class SqpSolver:
     tol: float = 1e-7
     max_iter: int = 30
 
-    def __call__(self, problem: OptProblem, y_start: np.ndarray, deadline: float) -> SolveResult:
-        return solve_sqp(problem, y_start, self.tol, self.max_iter, deadline)
+    def __call__(
+        self,
+        problem: OptProblem,
+        y_start: np.ndarray,
+        deadline: float,
+        hessian: np.ndarray | None = None,
+    ) -> SolveResult:
+        return solve_sqp(problem, y_start, self.tol, self.max_iter, deadline, hessian)
 
 
 def make_solver(settings: PlannerSettings) -> OptSolver:
@@ -115,6 +125,7 @@ class NehmoPlanner:
         self.peers_skipped = tuple(skipped)
         self.peers_unmodelled = tuple(unmodelled)
         self._warm = np.zeros(self.robot.dof)
+        self._hessian: np.ndarray | None = None  # the last solve's Lagrangian Hessian estimate
         s = self.settings
         self.self_clearance = (
             SelfClearance(self.robot, s.self_influence, s.self_safety, s.self_gain)
@@ -134,6 +145,7 @@ class NehmoPlanner:
 
     def reset(self) -> None:
         self._warm = np.zeros(self.robot.dof)
+        self._hessian = None
 
     # -- one tick -----------------------------------------------------------------------------
     def _current(
@@ -227,7 +239,8 @@ class NehmoPlanner:
         now = self._current(q, others)
         problem = self._problem(error0, now, rows)
         try:
-            result = self.solver(problem, self._warm, deadline)
+            hessian = self._hessian if self.settings.sqp_warm_hessian else None
+            result = self.solver(problem, self._warm, deadline, hessian)
             status = result.status
         except Exception as exc:  # any solver crash must end in the fail-safe
             result, status = None, f"failed ({type(exc).__name__})"
@@ -238,6 +251,8 @@ class NehmoPlanner:
         if result is not None and result.success and not late:
             u = problem.velocity(result.y)
             self._warm = result.y
+            if result.hessian is not None:
+                self._hessian = result.hessian
             n_value = len(now.ids)  # the V rows come first; self-clearance rows follow
             value_rows = result.constraint[:n_value]
             min_constraint = float(value_rows.min()) if len(value_rows) else math.nan

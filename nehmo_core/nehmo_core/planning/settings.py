@@ -52,6 +52,7 @@ class PlannerSettings:
     # SQP
     sqp_max_iter: int = 30
     sqp_tol: float = 1e-7  # step and constraint tolerance, in step units t_plan·u [rad]
+    sqp_warm_hessian: bool = True  # start BFGS from the previous tick's Hessian estimate
     # IPOPT (authors' settings)
     ipopt_tol: float = 1e-3
     ipopt_max_iter: int = 30
