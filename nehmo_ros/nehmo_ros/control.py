@@ -192,6 +192,8 @@ def order_joints(
     values = np.asarray(list(position), dtype=np.float64)
     if names:
         names = list(names)
+        if len(values) == len(names) and names == list(robot.joint_names):
+            return robot.check_q(values, parameter)  # in the robot's order already
         if sorted(names) != sorted(robot.joint_names) or len(values) != len(names):
             raise InvalidValueError(
                 parameter,

@@ -4,9 +4,9 @@
 :meth:`~BroadPhaseSimulator.collisions` returns exactly what
 :meth:`nehmo_core.geometry.pybullet_world.CellWorld.collisions` returns (same pairs in the same
 order, same links, same distances) but skips the exact PyBullet query of every pair that
-cannot touch. Each link with collision geometry is covered by a few spheres fixed in its link
-frame; a pair whose spheres are all more than :data:`SKIP_GAP` apart is separated, because the
-spheres contain the geometry, collision margins included. Every other pair gets the same
+cannot touch. Every link is covered by a few spheres fixed in its link frame; a pair whose
+spheres are all more than :data:`SKIP_GAP` apart is separated, because the spheres contain the
+collision geometry, collision margins included. Every other pair gets the same
 ``getClosestPoints`` query as in ``CellWorld``, so every collision is still found at the same
 physics step and reported the same way.
 
@@ -30,7 +30,6 @@ from nehmo_core.robots.model import Cell, RobotModel
 from nehmo_core.sim.cell_sim import CellSimulator
 
 FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.intp]
 
 #: Pairs whose bounding spheres are more than this apart [m] skip the exact query; the slack
 #: covers rounding in the sphere bounds and in PyBullet's distances.
@@ -99,7 +98,8 @@ def box_spheres(lower: FloatArray, upper: FloatArray) -> tuple[FloatArray, Float
 
 
 def link_spheres(robot: RobotModel) -> list[LinkSpheres]:
-    """Spheres of every link of ``robot`` that has collision geometry.
+    """Spheres covering every link of ``robot`` (those without collision geometry get the
+    small box PyBullet reports for them: harmless, and nothing is left out).
 
     Measured in a private DIRECT client: the robot is loaded as ``CellWorld`` loads it (fixed
     base, implicit cylinders), its collision bounding boxes (which include PyBullet's collision
@@ -116,8 +116,6 @@ def link_spheres(robot: RobotModel) -> list[LinkSpheres]:
         pb.performCollisionDetection(physicsClientId=client)  # bounding boxes of this pose
         out = []
         for link in range(BASE, pb.getNumJoints(body, physicsClientId=client)):
-            if not pb.getCollisionShapeData(body, link, physicsClientId=client):
-                continue
             if link == BASE:
                 position, orientation = pb.getBasePositionAndOrientation(
                     body, physicsClientId=client

@@ -100,6 +100,10 @@ class Executor:
             self._waitset = WaitSet(participant)
             self._guard = GuardCondition(participant)
             self._waitset.attach(self._guard)
+        elif len(subscriptions) == len(self._attached) and all(
+            id(s.condition) in self._attached and s._reader is not None for s in subscriptions
+        ):
+            return  # attached as wanted already
         wanted = {id(s.condition): s.condition for s in subscriptions if s._reader is not None}
         for key in [k for k in self._attached if k not in wanted]:
             self._waitset.detach(self._attached.pop(key))

@@ -5,7 +5,10 @@ ROS 2 over DDS names a type ``<pkg>::msg::dds_::<Type>_`` and serializes it as X
 structs are final, never ``@appendable``, which would switch cyclonedds to XCDR2) with no key.
 Integer widths are explicit: a bare ``int`` would become int64. No ``from __future__ import
 annotations`` here: cyclonedds resolves the annotations at run time. Nodes never see these classes:
-publishers convert from, and subscriptions to, the dataclasses of ``nehmo_core.logs.messages``.
+they register the topics' types, and publishers convert the dataclasses of
+``nehmo_core.logs.messages`` through them. The CDR they produce is byte for byte that of
+``nehmo_core.logs.messages.serialize``, so CDR bytes are published as they are and samples are
+taken as CDR and decoded with that codec (:mod:`nehmo_ros.embedded.node`).
 """
 
 from collections.abc import Callable

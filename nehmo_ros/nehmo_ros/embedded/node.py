@@ -15,7 +15,7 @@ from typing import Any
 
 from nehmo_core.logs.cdr import CDR_LE_HEADER
 from nehmo_core.logs.messages import Clock as ClockMsg
-from nehmo_core.logs.messages import deserialize, msgtype_of
+from nehmo_core.logs.messages import msgtype_of
 from nehmo_ros.embedded.arguments import LOG_LEVELS, parse_ros_args, resolve_overrides
 from nehmo_ros.embedded.clock import Clock, ClockType, ROSClock
 from nehmo_ros.embedded.context import Context, default_context
@@ -25,6 +25,7 @@ from nehmo_ros.embedded.exceptions import (
     ParameterNotDeclaredException,
     ParameterUninitializedException,
 )
+from nehmo_ros.embedded.fastcdr import decode
 from nehmo_ros.embedded.parameters import (
     Parameter,
     ParameterDescriptor,
@@ -298,11 +299,11 @@ class Subscription:
 
     def take(self, limit: int = 64) -> list[Any]:
         """Messages waiting in the reader (our dataclasses, or CDR bytes if `raw`)."""
-        if self._reader is None:
+        if self._reader is None or not self.condition.triggered:  # nothing waiting
             return []
         out = []
         for data in take_cdr(self._reader, limit):
-            out.append(data if self.raw else deserialize(data, self._msgtype))
+            out.append(data if self.raw else decode(data, self._msgtype))
         return out
 
     def get_publisher_count(self) -> int:
