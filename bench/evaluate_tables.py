@@ -143,6 +143,11 @@ def _table_text(summary: dict[str, Any]) -> str:
 def run_table(table: str, args: argparse.Namespace) -> list[dict[str, Any]]:
     summaries = []
     for setup_name, all_rows in TABLES[table]:
+        if args.setups and setup_name not in args.setups:
+            previous = args.out / f"table_{table}_{setup_name}.json"
+            if previous.exists():  # keep it in the table's markdown and plot
+                summaries.append(json.loads(previous.read_text()))
+            continue
         rows = [r for r in all_rows if r not in args.skip_rows]
         if args.only_rows:
             rows = [r for r in rows if r in args.only_rows]
@@ -195,6 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--value-model", action="append", default=[], metavar="[KIND=]SOURCE")
     parser.add_argument("--backend", default="auto", choices=("auto", "compiled", "vm"))
     parser.add_argument("--skip-rows", default="", help="comma-separated rows to leave out")
+    parser.add_argument("--setups", default="", help="comma-separated setups to run (default: all)")
     parser.add_argument(
         "--only-rows",
         default="",
@@ -208,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     args.skip_rows = {r for r in args.skip_rows.split(",") if r}
     args.only_rows = {r for r in args.only_rows.split(",") if r}
+    args.setups = {r for r in args.setups.split(",") if r}
     tables = [t.strip() for t in args.tables.split(",") if t.strip()]
     unknown = [t for t in tables if t not in TABLES]
     if unknown:
