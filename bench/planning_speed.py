@@ -15,12 +15,15 @@ Value model: the shipped ``ur5_ur5`` ``bc+sym`` value function (``--model random
 SIREN 3×128 with random weights: speed does not depend on the weights, but the constraint's
 activity does). Steps where the naive step is already safe cost one evaluation; constrained steps
 cost a few SQP iterations, so the distribution is bimodal and the constrained steps are reported
-on their own as well.
+on their own as well. Two planners side by side on the same scenarios: ``nehmo`` (the default
+settings: Opt plus the self-clearance rows, whose exact self-distances and Jacobians every step
+pays for) and ``nehmo_paper`` (the paper's Opt).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import platform
@@ -45,6 +48,7 @@ from nehmo_core.sim.scenarios import Scenario, sample_scenario
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CASES = (("dual_ur5", "ur5_0", 1), ("triple_ur5", "ur5_0", 2), ("five_ur5", "ur5_0", 4))
+VARIANTS = {"nehmo": PlannerSettings(), "nehmo_paper": PlannerSettings(self_clearance=False)}
 
 
 def _naive_collides(world: CellWorld, scenario: Scenario, steps: int) -> bool:
@@ -135,27 +139,33 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
         "steps_per_scenario": steps,
         "cases": {},
     }
-    for cell_name, arm, peers in CASES:
+    chomp: dict[str, list[float]] = {}
+    for (cell_name, arm, peers), (kind, settings) in itertools.product(CASES, VARIANTS.items()):
         cell = load_cell(cell_name)
         chosen = _scenarios(cell_name, scenarios, 200)
-        planners = {a: NehmoPlanner(cell, a, [model]) for a in cell.arm_ids}
+        planners = {a: NehmoPlanner(cell, a, [model], settings) for a in cell.arm_ids}
         assert len(planners[arm].pairs) == peers
         times: list[float] = []
         statuses: list[str] = []
         iterations: list[int] = []
-        chomp_times = []
         for scenario in chosen:
             t, s, it = _episode(cell_name, planners, scenario, steps, arm)
             times += t
             statuses += s
             iterations += it
-            chomp_times.append(plan_chomp(cell, scenario.start, scenario.goal).plan_time)
+        if cell_name not in chomp:
+            chomp[cell_name] = [
+                plan_chomp(cell, scenario.start, scenario.goal).plan_time for scenario in chosen
+            ]
+        chomp_times = chomp[cell_name]
         floor = _floor(model, peers)
         stats = _stats(times)
         counts = {k: statuses.count(k) for k in sorted(set(statuses))}
         constrained = [t for t, s in zip(times, statuses, strict=True) if s != "naive"]
         sqp_iters = [i for i, s in zip(iterations, statuses, strict=True) if s != "naive"]
-        report["cases"][cell_name] = {
+        report["cases"][f"{cell_name} {kind}"] = {
+            "cell": cell_name,
+            "planner": kind,
             "peers": peers,
             "scenarios": len(chosen),
             "steps": len(times),
@@ -174,7 +184,7 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
             "chomp_plan_median_s": float(np.median(chomp_times)),
             "chomp_over_nehmo_step": float(np.median(chomp_times)) / (stats["median_ms"] / 1e3),
         }
-        print(cell_name, json.dumps(report["cases"][cell_name]))
+        print(cell_name, kind, json.dumps(report["cases"][f"{cell_name} {kind}"]))
     # IPOPT, the authors' solver, on the dual cell for reference
     cell = load_cell("dual_ur5")
     ipopt = {
@@ -195,18 +205,19 @@ def markdown(report: dict[str, Any]) -> str:
         f"V/∇V backend: {report['backend']}; value model: {report['value_model']}; distance: "
         f"{report['distance_model']}.",
         "",
-        "| cell (peers) | steps | median ms | p95 ms | max ms | p95/median | constrained steps "
-        "| constrained median / p95 ms | SQP iterations median / p95 | fail-safe | floor ms "
-        "| median/floor | CHOMP s | CHOMP/NeHMO step |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| cell (peers) | planner | steps | median ms | p95 ms | max ms | p95/median "
+        "| constrained steps | constrained median / p95 ms | SQP iterations median / p95 "
+        "| fail-safe | floor ms | median/floor | CHOMP s | CHOMP/NeHMO step |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for name, c in report["cases"].items():
+    for c in report["cases"].values():
         n, k = c["nehmo"], c["nehmo_constrained_steps"]
         con = f"{k['median_ms']:.2f} / {k['p95_ms']:.2f}" if k else "-"
         it = c["sqp_iterations_constrained"]
         its = f"{it['median']:.0f} / {it['p95']:.0f}" if it["median"] is not None else "-"
         lines.append(
-            f"| {name} ({c['peers']}) | {c['steps']} | {n['median_ms']:.2f} | {n['p95_ms']:.2f} | "
+            f"| {c['cell']} ({c['peers']}) | {c['planner']} | {c['steps']} | "
+            f"{n['median_ms']:.2f} | {n['p95_ms']:.2f} | "
             f"{n['max_ms']:.1f} | {c['p95_over_median']:.1f} | {c['constrained_share']:.0%} | "
             f"{con} | {its} | {c['fail_safe_rate']:.1%} | "
             f"{c['floor_batched_v_grad_ms']:.3f} | {c['median_over_floor']:.1f} | "
