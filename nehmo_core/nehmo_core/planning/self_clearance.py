@@ -112,10 +112,12 @@ class SelfClearance:
         self._columns = [movable.index(j) for j in ours]
         self._extra = [j for j in movable if j not in ours]
 
+        self._last: tuple[np.ndarray, SelfClearanceRows] | None = None
         self._swapped = {(a, b): False for a, b, _, _ in self._pairs}
         if robot.name not in _WITNESS_ORDER:
             _WITNESS_ORDER[robot.name] = self._witness_order()
         self._swapped = _WITNESS_ORDER[robot.name]
+        self._last = None  # rows computed while the order was being found
 
     def _witness_order(self, samples: int = 60, seed: int = 0) -> dict[tuple[str, str], bool]:
         """Per link pair: whether PyBullet reports its witness points in swapped order.
@@ -179,7 +181,17 @@ class SelfClearance:
         return out
 
     def rows(self, q: np.ndarray) -> SelfClearanceRows:
-        """The damper rows at joint vector ``q`` (pairs closer than the influence distance)."""
+        """The damper rows at joint vector ``q`` (pairs closer than the influence distance).
+
+        The last answer is kept: asking again at the same ``q`` (a node computes the fail-safe
+        ahead of each solve from the same state) costs nothing."""
+        if self._last is not None and np.array_equal(self._last[0], q):
+            return self._last[1]
+        rows = self._rows(q)
+        self._last = (np.array(q, dtype=np.float64), rows)
+        return rows
+
+    def _rows(self, q: np.ndarray) -> SelfClearanceRows:
         n = self.robot.dof
         self._world.set_joint_positions("self", q)
         q_all: list[float] | None = None
