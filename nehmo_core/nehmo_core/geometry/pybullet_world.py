@@ -89,6 +89,10 @@ class CellWorld:
     def link_index(self, arm_id: str, link: str) -> int:
         return self._link_index[arm_id][link]
 
+    def joint_indices(self, arm_id: str) -> list[int]:
+        """PyBullet joint index of each of the arm's joints, in the robot's joint order."""
+        return list(self._joint_index[self.cell.arm(arm_id).arm_id])
+
     def set_joint_positions(self, arm_id: str, q: ArrayLike) -> None:
         """Pose one arm; ``q`` [rad] in the robot's joint order."""
         arm = self.cell.arm(arm_id)

@@ -107,7 +107,7 @@ class SelfClearance:
             for j in range(pb.getNumJoints(self._body, physicsClientId=self._client))
             if pb.getJointInfo(self._body, j, physicsClientId=self._client)[2] != pb.JOINT_FIXED
         ]
-        ours = self._world._joint_index["self"]
+        ours = self._world.joint_indices("self")
         self._movable = movable
         self._columns = [movable.index(j) for j in ours]
         self._extra = [j for j in movable if j not in ours]
