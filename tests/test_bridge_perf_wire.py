@@ -14,7 +14,7 @@ from _ros_testutil import DOMAIN_ID
 from nehmo_core.logs.cdr import CdrError
 from nehmo_core.logs.messages import deserialize, serialize
 from nehmo_ros import msgs
-from nehmo_ros.embedded import Node, SingleThreadedExecutor, init, try_shutdown
+from nehmo_ros.embedded import Node, SingleThreadedExecutor, fastcdr, init, try_shutdown
 from nehmo_ros.embedded.fastcdr import decode
 from nehmo_ros.embedded.idl import IDL_TYPES
 
@@ -110,6 +110,7 @@ def test_joint_state_decoder_equals_the_generic_one() -> None:
     for m in _joint_states(rng, 500):
         data = serialize(m)
         for variant in (data, data + bytes(-len(data) % 4)):  # with the wire's padding
+            assert fastcdr._joint_state(variant) == m  # the fast path itself, not its fallback
             assert decode(variant, m._TYPE) == m
         for cut in rng.integers(0, len(data), 3):  # truncated: the generic error, unchanged
             with pytest.raises(CdrError) as generic:
@@ -117,6 +118,8 @@ def test_joint_state_decoder_equals_the_generic_one() -> None:
             with pytest.raises(CdrError) as fast:
                 decode(data[:cut], m._TYPE)
             assert str(fast.value) == str(generic.value)
+            with pytest.raises(Exception):  # noqa: B017  (the fast path refuses it too)
+                fastcdr._joint_state(data[:cut])
 
 
 def test_other_types_go_to_the_generic_decoder() -> None:
@@ -126,3 +129,24 @@ def test_other_types_go_to_the_generic_decoder() -> None:
     bad[bad.index(b"a\x00") + 1] = 0x41  # the name's NUL
     with pytest.raises(CdrError, match="NUL"):
         decode(bytes(bad), msgs.JointState._TYPE)
+
+
+def test_a_sample_that_does_not_decode_costs_only_itself(
+    context: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Samples are removed from the reader before decoding: a bad one is dropped and counted,
+    the others of the same batch are still delivered."""
+    import nehmo_ros.embedded.node as node_module
+
+    node = Node("wire_drop")
+    try:
+        sub = node.create_subscription(msgs.JointState, "/drop/joint_states", lambda m: None, 10)
+        good = msgs.JointState(name=["a"], position=[1.0])
+        big_endian = bytes([0, 0, 0, 0]) + serialize(good)[4:]  # not little-endian XCDR1
+        batch = [serialize(good), big_endian, serialize(good)]
+        monkeypatch.setattr(node_module, "take_cdr", lambda reader, limit: batch)
+        monkeypatch.setattr(sub, "condition", type("Triggered", (), {"triggered": True})())
+        assert sub.take() == [good, good]
+        assert sub.dropped == 1
+    finally:
+        node.destroy_node()

@@ -285,6 +285,8 @@ class Subscription:
         self.qos_profile = qos
         self.callback_group = callback_group
         self.raw = raw
+        self.dropped = 0  # samples that did not decode (little-endian XCDR1 expected)
+        self._logger = node.get_logger()
         self._msgtype = _known_msgtype(msg_type)
         context = node.context
         dds_topic = context.topic("rt" + topic, IDL_TYPES[self._msgtype])
@@ -301,9 +303,20 @@ class Subscription:
         """Messages waiting in the reader (our dataclasses, or CDR bytes if `raw`)."""
         if self._reader is None or not self.condition.triggered:  # nothing waiting
             return []
+        samples = take_cdr(self._reader, limit)
+        if self.raw:
+            return samples
         out = []
-        for data in take_cdr(self._reader, limit):
-            out.append(data if self.raw else decode(data, self._msgtype))
+        for data in samples:  # one undecodable sample must not cost the others (already taken)
+            try:
+                out.append(decode(data, self._msgtype))
+            except Exception as exc:
+                self.dropped += 1
+                if self.dropped == 1 or self.dropped % 100 == 0:
+                    self._logger.warning(
+                        f"{self.topic_name}: dropped {self.dropped} sample(s) that do not decode "
+                        f"as {self._msgtype} (last: {exc})"
+                    )
         return out
 
     def get_publisher_count(self) -> int:
