@@ -4,7 +4,9 @@ Every tick: map each peer in reach into a trained pair model's frame; evaluate `
 of all pairs at ``τ = t_plan`` from the current state (one batched call per model); predict each
 peer under its worst case ``dⁱ = −d̄·sign(∂V/∂qⁱ)``; solve Opt; and if the solve fails, is
 infeasible or misses the deadline, apply the fail-safe ``u = ū·sign(∂V/∂q¹)`` of the most
-critical pair (the smallest ``V``), i.e. the HJI optimal control of that pair. Peers out of
+critical pair (the smallest ``V``), i.e. the HJI optimal control of that pair. With
+``self_clearance`` on (the default; not in the paper), Opt also carries the arm's self-collision
+damper rows and the fail-safe is projected onto them (:mod:`.self_clearance`). Peers out of
 reach are skipped; peers in reach that no model fits are reported as unmodelled (they are not
 constrained, so a caller must treat them as a configuration error or accept the risk).
 """
