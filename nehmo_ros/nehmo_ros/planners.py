@@ -5,7 +5,7 @@ The node's ``model`` parameter is the evaluation's value-model source list
 same pair models:
 
 ``shipped``    the shipped value functions of the cell's robot pairs (variant per planner kind:
-               nehmo → bc+sym, nehmo_no_sym → bc, opt_deepreach → deepreach);
+               nehmo, nehmo_paper → bc+sym, nehmo_no_sym → bc, opt_deepreach → deepreach);
 ``synthetic``  random-weight stand-ins on the pair's learned distance, for plumbing tests and
                demos until trained models ship (V is the distance plus a small residual, not a
                reachability value);
