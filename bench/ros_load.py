@@ -360,8 +360,9 @@ def markdown(r: dict[str, Any]) -> str:
         f"{r['machine']}; model {r['model']}; goals alternate every {r['goal_period_s']:g} s;"
         f" exit codes {r['exit_codes']}; {r['log_messages']} messages logged,"
         f" {r['collision_messages']} collision messages (colliding steps by pair, self-collisions"
-        f" as a-a: {r['collision_steps_by_pair']}; planners avoid other arms, not themselves,"
-        " and the diagonal neighbours have no pair model); the bridge simulated"
+        f" as a-a: {r['collision_steps_by_pair']}; planners constrain the peers a shipped pair"
+        " model covers: in five_ur5 the facing outer arms, 1.2 m apart, have none); the bridge"
+        " simulated"
         f" {r['bridge_simulated_s']} s (real-time factor {r['bridge_realtime_factor']}: below 1"
         " the 100 Hz physics did not keep up).",
         "",
