@@ -201,7 +201,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                 "cell": cell.name,
                 "planner": "nehmo",
                 "model": args.model,
-                "allow_unmodelled": True,  # the diagonal neighbours (0.85 m) have no pair model
+                "allow_unmodelled": True,  # the facing outer arms (1.2 m) have no pair model
             }
             launch(f"planner_{arm_id}", "nehmo_ros.arm_planner", params)
         for arm_id in cell.arm_ids:
