@@ -207,6 +207,61 @@ class _Slow:
 @pytest.mark.parametrize(
     ("solver", "status"), [(_Failing(), "failed"), (_Crashing(), "failed (RuntimeError)")]
 )
+def _stalled_case(model: PairValueModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A state whose goal lies straight through the peer's level set: Opt stops at it."""
+    q1, q2, _ = _near_contact(model, 5, 1)[0]
+    _, g = model.evaluate(0.1, np.concatenate([q1, q2])[None])
+    return q1, q2, q1 - 1.5 * g[0, :6] / np.abs(g[0, :6]).max()
+
+
+def _closed_loop(planner: NehmoPlanner, q1, q2, goal, ticks: int) -> list:
+    """The own arm integrates its commands over 0.04 s ticks; the peer stands still."""
+    out = []
+    for _ in range(ticks):
+        result = planner.plan(q1, {PEER: q2}, goal)
+        out.append((q1.copy(), result))
+        q1 = q1 + 0.04 * result.velocity
+    return out
+
+
+def test_stall_escape_moves_along_the_level_set_and_keeps_the_constraint(model) -> None:
+    q1, q2, goal = _stalled_case(model)
+    settings = PlannerSettings(deadline=1.0, stall_ticks=5, escape_ticks=10)
+    stuck = _closed_loop(
+        NehmoPlanner(CELL, OWN, [model], settings.replace(escape=False)), q1, q2, goal, 60
+    )
+    tail = np.array([q for q, _ in stuck[-20:]])
+    assert np.abs(tail - tail[-1]).max() < 1e-3  # without the escape the arm stops for good
+    assert np.linalg.norm(tail[-1] - goal) > 0.1
+    assert not any(r.telemetry.escaping for _, r in stuck)
+    planner = NehmoPlanner(CELL, OWN, [model], settings)
+    run = _closed_loop(planner, q1, q2, goal, 60)
+    escaping = [i for i, (_, r) in enumerate(run) if r.telemetry.escaping]
+    assert escaping, "the stall was not detected"
+    first = escaping[0]
+    assert escaping[:10] == list(range(first, first + 10))  # one escape lasts escape_ticks
+    moved = np.linalg.norm(run[first + 9][0] - run[first][0])
+    assert moved > 0.05  # [rad]: it left the stall point
+    for _, r in run:
+        if not r.telemetry.fail_safe:
+            assert r.telemetry.min_constraint >= -1e-6  # every step, escaping or not, is safe
+    # deterministic, and reset() clears the escape state
+    planner.reset()
+    again = _closed_loop(planner, q1, q2, goal, 60)
+    np.testing.assert_array_equal(
+        np.array([r.velocity for _, r in again]), np.array([r.velocity for _, r in run])
+    )
+
+
+def test_paper_preset_and_kind_have_no_escape(model) -> None:
+    assert PlannerSettings().escape
+    assert not PlannerSettings.preset("paper").escape
+    from nehmo_core.planning.factory import make_planner
+
+    planner = make_planner("nehmo_paper", CELL, OWN, [model])
+    assert isinstance(planner, NehmoPlanner) and not planner.settings.escape
+
+
 def test_fail_safe_fires_on_solver_failure(model, value_function, solver, status) -> None:
     planner = NehmoPlanner(CELL, OWN, [model], solver=solver)
     q1, q2, goal = _near_contact(model, 6, 1)[0]
@@ -272,6 +327,9 @@ def test_fail_safe_picks_the_most_critical_of_several_peers(model) -> None:
         ({"deadline": 0.0}, "deadline"),
         ({"sqp_max_iter": 0}, "sqp_max_iter"),
         ({"reach_margin": -1.0}, "reach_margin"),
+        ({"stall_ticks": 0}, "stall_ticks"),
+        ({"escape_ticks": 0}, "escape_ticks"),
+        ({"stall_progress": -0.1}, "stall_progress"),
     ],
 )
 def test_bad_settings_are_rejected_naming_the_parameter(changes, parameter) -> None:

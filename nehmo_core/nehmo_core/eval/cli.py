@@ -69,8 +69,48 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="the paper's Opt: no self-collision rows in Opt or the fail-safe",
     )
+    parser.add_argument(
+        "--no-escape",
+        action="store_true",
+        help="no stall escape: an arm that stops against a peer's constraint stays stopped",
+    )
+    parser.add_argument(
+        "--planner-setting",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a PlannerSettings field for every Opt row, e.g. t_plan=0.08; repeatable",
+    )
     parser.add_argument("--render", action="store_true", help="render each row's first episode")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def parse_settings(items: list[str]) -> dict[str, object]:
+    """``["t_plan=0.08", "escape=false"]`` → PlannerSettings overrides, typed by the field."""
+    fields = PlannerSettings.__dataclass_fields__
+    defaults = PlannerSettings()
+    out: dict[str, object] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or key not in fields:
+            raise InvalidValueError(
+                "--planner-setting", f"must be KEY=VALUE with KEY one of {sorted(fields)}", item
+            )
+        kind = type(getattr(defaults, key))
+        text = text.strip()
+        try:
+            if kind is bool:
+                if text.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(text)
+                out[key] = text.lower() in ("true", "1")
+            else:
+                out[key] = kind(text)
+        except ValueError:
+            raise InvalidValueError(
+                "--planner-setting", f"{key} must be a {kind.__name__}", text
+            ) from None
+    return out
 
 
 def _scenarios(args: argparse.Namespace) -> ScenarioSet:
@@ -111,6 +151,10 @@ def run(args: argparse.Namespace) -> int:
         planner_settings = planner_settings.replace(fail_safe_deadband=args.fail_safe_deadband)
     if args.no_self_clearance:
         planner_settings = planner_settings.replace(self_clearance=False)
+    if args.no_escape:
+        planner_settings = planner_settings.replace(escape=False)
+    if args.planner_setting:
+        planner_settings = planner_settings.replace(**parse_settings(args.planner_setting))
     config = BatchConfig(
         setup=args.setup,
         out_dir=args.out,

@@ -57,6 +57,7 @@ def status_message(
         "peers_skipped": _ids(t.peers_skipped),
         "peers_unmodelled": _ids(t.peers_unmodelled),
         "critical_peer": t.critical_peer or "",
+        "escaping": "true" if t.escaping else "false",
     }
     return DiagnosticStatus(
         level=DiagnosticStatus.WARN if t.fail_safe else DiagnosticStatus.OK,
@@ -106,6 +107,7 @@ def telemetry_from_status(msg: DiagnosticStatus) -> StatusRecord:
         peers_skipped=_split(values.get("peers_skipped", "")),
         peers_unmodelled=_split(values.get("peers_unmodelled", "")),
         critical_peer=values.get("critical_peer") or None,
+        escaping=values.get("escaping") == "true",
     )
     return StatusRecord(
         msg.hardware_id, values["planner"], int(values["observation_ns"]), telemetry

@@ -2,8 +2,9 @@
 
 =================  =====================================================================
 ``nehmo``          Opt with the ``bc+sym`` value model (the paper's NeHMO), plus the
-                   self-clearance rows (:mod:`~nehmo_core.planning.self_clearance`)
-``nehmo_paper``    NeHMO exactly as the paper's Opt: no self-clearance rows
+                   self-clearance rows (:mod:`~nehmo_core.planning.self_clearance`) and
+                   the stall escape (:class:`~nehmo_core.planning.nehmo.NehmoPlanner`)
+``nehmo_paper``    NeHMO exactly as the paper's Opt: no self-clearance rows, no stall escape
 ``nehmo_no_sym``   Opt with the ``bc`` value model (NeHMO w/o Sym)
 ``opt_deepreach``  Opt with the ``deepreach`` value model (Opt + DeepReach)
 ``nehmo_wrap``     NeHMO whose goal cost wraps continuous joints (the paper does not)
@@ -14,8 +15,9 @@
 =================  =====================================================================
 
 The Opt rows differ only in the pair value models passed in (``nehmo_wrap`` also in its goal
-cost, ``nehmo_paper`` in leaving out the self-clearance rows); which trained model backs which
-row is the caller's choice (the model registry lives with the trained weights).
+cost, ``nehmo_paper`` in leaving out the self-clearance rows and the stall escape); which
+trained model backs which row is the caller's choice (the model registry lives with the trained
+weights).
 """
 
 from __future__ import annotations
@@ -55,7 +57,7 @@ def make_planner(
         if kind == "nehmo_wrap":
             settings = (settings or PlannerSettings()).replace(wrap_goal=True)
         if kind == "nehmo_paper":
-            settings = (settings or PlannerSettings()).replace(self_clearance=False)
+            settings = (settings or PlannerSettings()).replace(self_clearance=False, escape=False)
         return NehmoPlanner(cell, arm_id, models, settings)
     if kind in ("naive", "reckless"):
         return NaivePlanner(cell, arm_id, settings, reckless=kind == "reckless")

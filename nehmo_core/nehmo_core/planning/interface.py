@@ -3,8 +3,9 @@
 A planner belongs to one arm of a cell (the cell gives every arm's robot type and base pose).
 Each control tick it is called with the own joint state, the other arms' joint states and the
 own goal, all [rad] in each robot's joint order, and returns a joint-velocity command [rad/s]
-with telemetry. Planners keep no state between calls other than a warm start (and, for the
-trajectory-tracking adapters of centralized planners, the clock of the tracked trajectory).
+with telemetry. Planners keep no state between calls other than a warm start (NeHMO also its
+stall counter and escape direction; the trajectory-tracking adapters of centralized planners the
+clock of the tracked trajectory); ``reset`` clears it.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ class Telemetry:
     peer in range), ``infeasible``, ``iteration_limit``, ``timeout``, ``failed``, or a baseline's
     own (``naive_planner``, ``reckless``, ``tracking``). ``min_value`` is the smallest
     ``V(t_plan, x)`` [m] over constrained peers at the current state (``inf`` without peers).
+    ``escaping``: NeHMO is leaving a stall (see ``PlannerSettings.escape``).
     """
 
     solve_time: float  # [s], wall time of the whole plan() call
@@ -42,6 +44,7 @@ class Telemetry:
     peers_skipped: tuple[str, ...] = ()  # out of reach
     peers_unmodelled: tuple[str, ...] = ()  # in reach but no pair model fits: NOT constrained
     critical_peer: str | None = None
+    escaping: bool = False  # the step followed a stall-escape direction, not the goal
 
 
 @dataclass(frozen=True)

@@ -9,12 +9,24 @@ critical pair (the smallest ``V``), i.e. the HJI optimal control of that pair. W
 damper rows and the fail-safe is projected onto them (:mod:`.self_clearance`). Peers out of
 reach are skipped; peers in reach that no model fits are reported as unmodelled (they are not
 constrained, so a caller must treat them as a configuration error or accept the risk).
+
+Stall escape (``escape``, on by default; not in the paper): Opt only ever takes the step closest
+to the goal, so an arm whose goal lies behind a peer's level set stops where the goal direction
+meets the constraint (a local minimum on the safe set). After ``stall_ticks`` calls without
+progress against an active V row, the arm swaps its goal cost for a target step along a random
+direction projected onto the tangent space of the critical pair's level set, for
+``escape_ticks`` calls (doubled on each repeated stall, up to 4×), then heads for the goal
+again. An arm held at its goal against a peer's constraint for ``stall_ticks`` calls yields:
+for ``yield_ticks`` calls it steps up V's gradient of the critical pair (making room for a peer
+that may be stuck behind it), then returns. Every escape step is an Opt solution with the same
+constraints, so safety is unchanged.
 """
 
 from __future__ import annotations
 
 import math
 import time
+import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -126,8 +138,7 @@ class NehmoPlanner:
                 self.pairs[peer.arm_id] = mapping
         self.peers_skipped = tuple(skipped)
         self.peers_unmodelled = tuple(unmodelled)
-        self._warm = np.zeros(self.robot.dof)
-        self._hessian: np.ndarray | None = None  # the last solve's Lagrangian Hessian estimate
+        self.reset()
         s = self.settings
         self.self_clearance = (
             SelfClearance(self.robot, s.self_influence, s.self_safety, s.self_gain)
@@ -147,7 +158,61 @@ class NehmoPlanner:
 
     def reset(self) -> None:
         self._warm = np.zeros(self.robot.dof)
-        self._hessian = None
+        self._hessian: np.ndarray | None = None  # the last solve's Lagrangian Hessian estimate
+        seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape_seed
+        self._rng = np.random.default_rng(seed)
+        self._stall = 0  # consecutive calls without progress against an active V row
+        self._escapes = 0  # escapes since the last progress toward the goal
+        self._escape_left = 0  # calls left in the current escape
+        self._escape_dir = np.zeros(self.robot.dof)
+        self._yielding = False  # the current escape gives way at the goal
+        self._last_error = math.inf
+
+    # -- stall escape -------------------------------------------------------------------------
+    def _escape_error(self, now: _Peers) -> np.ndarray:
+        """The stand-in for ``e₀`` while escaping: minus a full-speed target step, along the
+        escape direction projected onto the tangent space of the critical pair's level set of V
+        (a stalled arm), or straight up V's gradient (an arm yielding its goal)."""
+        g = now.grads[int(np.argmin(now.values))][: self.robot.dof]
+        if self._yielding:
+            d = g
+        else:
+            d = self._escape_dir
+            gg = float(g @ g)
+            if gg > 1e-12:
+                d = d - (d @ g) / gg * g
+        peak = float(np.abs(d).max())
+        if peak < 1e-9:
+            return np.zeros(self.robot.dof)
+        return -(self.settings.t_plan * self.settings.u_max / peak) * d
+
+    def _track_stall(self, error0: np.ndarray, pressed: bool) -> None:
+        """Count calls without progress while a V row is active; start an escape (away from
+        the goal) or a yield (at the goal) after ``stall_ticks`` of them."""
+        s = self.settings
+        e = float(np.linalg.norm(error0))
+        step = s.t_plan * s.u_max
+        progressed = self._last_error - e > s.stall_progress * step
+        self._last_error = e
+        if self._escape_left > 0:
+            self._escape_left -= 1
+            return
+        if not pressed or (progressed and e >= step):
+            self._stall = 0
+            if progressed:
+                self._escapes = 0
+            return
+        self._stall += 1
+        if self._stall < s.stall_ticks:
+            return
+        self._stall = 0
+        self._yielding = e < step
+        if self._yielding:
+            self._escape_left = s.yield_ticks
+        else:
+            self._escapes += 1
+            self._escape_left = s.escape_ticks * min(2 ** (self._escapes - 1), 4)
+            self._escape_dir = self._rng.standard_normal(self.robot.dof)
 
     # -- one tick -----------------------------------------------------------------------------
     def _current(
@@ -239,7 +304,8 @@ class NehmoPlanner:
             self._warm = u * self.settings.t_plan
             return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
         now = self._current(q, others)
-        problem = self._problem(error0, now, rows)
+        escaping = self.settings.escape and self._escape_left > 0
+        problem = self._problem(self._escape_error(now) if escaping else error0, now, rows)
         try:
             hessian = self._hessian if self.settings.sqp_warm_hessian else None
             result = self.solver(problem, self._warm, deadline, hessian)
@@ -263,6 +329,8 @@ class NehmoPlanner:
             u = self._fail_safe(now, rows)
             self._warm = problem.t_plan * u
             min_constraint, fail_safe = math.nan, True
+        if self.settings.escape:
+            self._track_stall(error0, min_constraint < self.settings.stall_margin)
         telemetry = Telemetry(
             solve_time=time.perf_counter() - start,
             status=status,
@@ -271,6 +339,7 @@ class NehmoPlanner:
             min_constraint=min_constraint,
             iterations=result.iterations if result is not None else 0,
             critical_peer=critical,
+            escaping=escaping,
             **info,
         )
         return PlanResult(u, telemetry)

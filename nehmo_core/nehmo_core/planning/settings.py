@@ -15,7 +15,7 @@ SOLVERS = ("sqp", "ipopt")
 
 _PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
-    "paper": {"self_clearance": False},
+    "paper": {"self_clearance": False, "escape": False},
     "ipopt": {"solver": "ipopt"},
     "wrapped_goal": {"wrap_goal": True},
 }
@@ -48,6 +48,18 @@ class PlannerSettings:
     self_influence: float = 0.10
     self_safety: float = 0.005
     self_gain: float = 0.5
+    # stall escape (not in the paper's Opt): after stall_ticks plan() calls in which the goal
+    # error fell by less than stall_progress·t_plan·ū while a V row was within stall_margin [m]
+    # of ε, the arm follows a random direction tangent to the critical pair's level set of V
+    # for escape_ticks calls (longer on repeated stalls), then heads for the goal again; an arm
+    # held at its goal that long yields: it steps up V's gradient for yield_ticks calls
+    escape: bool = True
+    stall_ticks: int = 12
+    escape_ticks: int = 25
+    yield_ticks: int = 12
+    stall_progress: float = 0.1
+    stall_margin: float = 0.01
+    escape_seed: int = 0
     backend: str = "auto"  # evaluation of V, ∇V: generated C ("compiled") or CasADi's "vm"
     # SQP
     sqp_max_iter: int = 30
@@ -75,9 +87,13 @@ class PlannerSettings:
             )
         if not 0.0 < self.self_gain <= 1.0:
             raise InvalidValueError("self_gain", "must lie in (0, 1]", self.self_gain)
+        for name in ("stall_progress", "stall_margin"):
+            if not getattr(self, name) >= 0:
+                raise InvalidValueError(name, "must be >= 0", getattr(self, name))
         if not self.reach_margin >= 0:
             raise InvalidValueError("reach_margin", "must be >= 0", self.reach_margin)
-        for name in ("sqp_max_iter", "ipopt_max_iter"):
+        counts = ("sqp_max_iter", "ipopt_max_iter", "stall_ticks", "escape_ticks", "yield_ticks")
+        for name in counts:
             if getattr(self, name) < 1:
                 raise InvalidValueError(name, "must be >= 1", getattr(self, name))
         if not self.ipopt_tol > 0:
@@ -89,7 +105,8 @@ class PlannerSettings:
 
     @classmethod
     def preset(cls, name: str, **overrides: Any) -> PlannerSettings:
-        """Named settings: ``default``; ``paper`` (the paper's Opt: no self-clearance rows);
+        """Named settings: ``default``; ``paper`` (the paper's Opt: no self-clearance rows, no
+        stall escape);
         ``ipopt``; ``wrapped_goal``."""
         if name not in _PRESETS:
             raise UnknownNameError("planner preset", name, _PRESETS)
