@@ -48,7 +48,7 @@ from nehmo_core.sim.scenarios import Scenario, sample_scenario
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CASES = (("dual_ur5", "ur5_0", 1), ("triple_ur5", "ur5_0", 2), ("five_ur5", "ur5_0", 4))
-VARIANTS = {"nehmo": PlannerSettings(), "nehmo_paper": PlannerSettings(self_clearance=False)}
+VARIANTS = {"nehmo": PlannerSettings(), "nehmo_paper": PlannerSettings.preset("paper")}
 
 
 def _naive_collides(world: CellWorld, scenario: Scenario, steps: int) -> bool:

@@ -204,9 +204,6 @@ class _Slow:
         return SqpSolver()(problem, y_start, np.inf)
 
 
-@pytest.mark.parametrize(
-    ("solver", "status"), [(_Failing(), "failed"), (_Crashing(), "failed (RuntimeError)")]
-)
 def _stalled_case(model: PairValueModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A state whose goal lies straight through the peer's level set: Opt stops at it."""
     q1, q2, _ = _near_contact(model, 5, 1)[0]
@@ -262,6 +259,9 @@ def test_paper_preset_and_kind_have_no_escape(model) -> None:
     assert isinstance(planner, NehmoPlanner) and not planner.settings.escape
 
 
+@pytest.mark.parametrize(
+    ("solver", "status"), [(_Failing(), "failed"), (_Crashing(), "failed (RuntimeError)")]
+)
 def test_fail_safe_fires_on_solver_failure(model, value_function, solver, status) -> None:
     planner = NehmoPlanner(CELL, OWN, [model], solver=solver)
     q1, q2, goal = _near_contact(model, 6, 1)[0]

@@ -19,7 +19,8 @@ the value): ``arm_id`` (required), ``cell`` (required: shipped name or YAML path
 (nehmo | nehmo_paper | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless), ``model``
 (shipped | synthetic | path), ``rate`` [Hz], ``t_plan``, ``t_safe`` [s], ``epsilon`` [m],
 ``u_max``, ``d_max`` [rad/s], ``solver`` (sqp | ipopt), ``self_clearance`` (self-collision
-dampers in Opt and the fail-safe; false: the paper's Opt), ``deadline`` [s] (0: 75 % of the
+dampers in Opt and the fail-safe; false: the paper's Opt), ``escape`` (stall escape and
+yield, see :class:`nehmo_core.planning.nehmo.NehmoPlanner`; false: the paper's Opt), ``deadline`` [s] (0: 75 % of the
 period), ``peer_timeout`` [s], ``stale_policy`` (hold | fail_safe: what a stale or untrusted
 peer triggers), ``jump_margin`` [rad] (slack of the test that flags joint states moving faster
 than ``d_max``; ``.inf``: off), ``allow_unmodelled`` (accept peers in reach that no pair model
@@ -73,6 +74,7 @@ DEFAULTS: dict[str, Any] = {
     "d_max": 0.5,
     "solver": "sqp",
     "self_clearance": True,
+    "escape": True,
     "deadline": 0.0,
     "peer_timeout": 0.25,
     "stale_policy": "hold",
@@ -131,6 +133,7 @@ class ArmPlannerNode:
             solver=p["solver"],
             deadline=deadline,
             self_clearance=bool(p["self_clearance"]),
+            escape=bool(p["escape"]),
         )
         planner = build_planner(
             p["planner"], self.cell, arm_id, p["model"], settings, bool(p["allow_unmodelled"])
