@@ -6,10 +6,10 @@ For every scenario of the committed seed-0 sets, all arms are put at their goals
 problem Opt is built there as the planner would (worst-case peer prediction over ``t_plan``,
 ``V(t_safe, ·) ≥ ε``): the goal set is *inside the margin* when some arm's constraint is
 violated by the zero step. Such an episode can end with every arm at its goal only within the
-success tolerance, short of the exact goals, or by breaking the margin; most end stuck. The count is given for the default
-``t_plan`` and for shorter planning horizons (the paper's remark that a faster solve allows a
-shorter adversarial horizon), and cross-tabulated with the outcomes of the ``nehmo`` rows in the
-committed tables.
+success tolerance, short of the exact goals, or by breaking the margin; most end stuck. The
+count is given for the default ``t_plan`` and for shorter planning horizons (the paper's remark
+that a faster solve allows a shorter adversarial horizon), and cross-tabulated with the outcomes
+of the ``nehmo`` rows in the committed tables.
 """
 
 from __future__ import annotations
@@ -96,7 +96,8 @@ def markdown(report: dict[str, Any]) -> str:
         "A goal set is *inside the margin* when, with every arm at its goal, some arm's Opt "
         "constraint `V(t_safe, ·) ≥ ε` (worst-case peer over `t_plan`) fails for the zero step: "
         "no safe Opt planner can hold every arm exactly at its goal, so such an episode succeeds "
-        "only if the arms stop within the success tolerance short of the exact goals. Seed-0 scenario sets, shipped models, default settings "
+        "only if the arms stop within the success tolerance short of the exact goals. "
+        "Seed-0 scenario sets, shipped models, default settings "
         f"(ε = {PlannerSettings().epsilon}, t_safe = {PlannerSettings().t_safe}).",
         "",
         "| setup | scenarios | inside, t_plan = "
