@@ -19,13 +19,13 @@ the value): ``arm_id`` (required), ``cell`` (required: shipped name or YAML path
 (nehmo | nehmo_paper | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless), ``model``
 (shipped | synthetic | path), ``rate`` [Hz], ``t_plan``, ``t_safe`` [s], ``epsilon`` [m],
 ``u_max``, ``d_max`` [rad/s], ``solver`` (sqp | ipopt), ``self_clearance`` (self-collision
-dampers in Opt and the fail-safe; false: the paper's Opt), ``escape`` (stall escape and
-yield, see :class:`nehmo_core.planning.nehmo.NehmoPlanner`; false: the paper's Opt),
-``deadline`` [s] (0: 75 % of the period), ``peer_timeout`` [s], ``stale_policy`` (hold | fail_safe: what a stale or untrusted
-peer triggers), ``jump_margin`` [rad] (slack of the test that flags joint states moving faster
-than ``d_max``; ``.inf``: off), ``allow_unmodelled`` (accept peers in reach that no pair model
-covers: they are then not constrained; default false: an error), ``fault_injection`` (tests
-only, default '' = off: :mod:`nehmo_ros.fault_injection`).
+dampers in Opt and the fail-safe; false: the paper's Opt), ``escape`` (stall escape and yield,
+see :class:`nehmo_core.planning.nehmo.NehmoPlanner`; false: the paper's Opt), ``deadline`` [s]
+(0: 75 % of the period), ``peer_timeout`` [s], ``stale_policy`` (hold | fail_safe: what a stale
+or untrusted peer triggers), ``jump_margin`` [rad] (slack of the test that flags joint states
+moving faster than ``d_max``; ``.inf``: off), ``allow_unmodelled`` (accept peers in reach that
+no pair model covers: they are then not constrained; default false: an error),
+``fault_injection`` (tests only, default '' = off: :mod:`nehmo_ros.fault_injection`).
 
 Faults are reported, never fatal: rejected or jumping joint states, stale peers, solver
 exceptions and missed deadlines each log a WARN line (at most one per cause every 2 s) and
