@@ -15,11 +15,11 @@ to the goal, so an arm whose goal lies behind a peer's level set stops where the
 meets the constraint (a local minimum on the safe set). After ``stall_ticks`` calls without
 progress against an active V row, the arm swaps its goal cost for a target step along a random
 direction projected onto the tangent space of the critical pair's level set, for
-``escape_ticks`` calls (doubled on each repeated stall, up to 4×), then heads for the goal
-again. An arm held at its goal against a peer's constraint for ``stall_ticks`` calls yields:
-for ``yield_ticks`` calls it steps up V's gradient of the critical pair (making room for a peer
-that may be stuck behind it), then returns. Every escape step is an Opt solution with the same
-constraints, so safety is unchanged.
+``escape_ticks`` calls (doubled, up to 4×, when it stalls again without any progress in
+between), then heads for the goal again. An arm held at its goal against a peer's constraint for
+``stall_ticks`` calls yields: for ``yield_ticks`` calls it steps up V's gradient of the critical
+pair (making room for a peer that may be stuck behind it), then returns. Every escape step is an
+Opt solution with the same constraints, so safety is unchanged.
 """
 
 from __future__ import annotations
