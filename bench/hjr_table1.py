@@ -59,13 +59,12 @@ PAPER: dict[str, dict[str, list[float | None]]] = {
 LABEL = {"air3d": "Air3D", "two_link": "Simple arm (two-link)"}
 SHORTFALL = {
     "two_link": (
-        "  Why: the `cpu` preset was tuned on Air3D only. The two-link pair trains at ~25–35k "
-        "samples/s on one thread (its segment-distance boundary and gradient are evaluated "
-        "every step), so one 40M run takes ~25 min and no two-link tuning has been run yet. "
-        "Its error grows with τ (the PDE residual left at the end of training integrates over the "
-        "horizon); at τ = 0.5 s, where the authors validate the two-link pair, it is under the "
-        "bar. Next tries, from the Air3D screening (`hjr_tuning.md`): batch 250 (cut the 4M "
-        "Air3D error from 0.021 to 0.0135) and width 128 for the more intricate 4-D boundary."
+        "  Why: the error grows with τ (the PDE residual left at the end of training "
+        "integrates over the horizon); at τ = 0.5 s, where the authors validate the two-link "
+        "pair, it is under the bar. Three two-link-specific changes to the Air3D-tuned `cpu` "
+        "preset did not help at 40M (`hjr_tuning.md` #18–#19): batch 250 0.0147, curriculum "
+        "over 0.3 of the steps 0.0123; width 128 diverged to 5× the loss by 26M and was "
+        "stopped. One 40M two-link run takes ~21 min on a quiet core."
     ),
 }
 COLOR = {"deepreach": "tab:gray", "bc": "tab:blue", "bc+sym": "tab:red"}
