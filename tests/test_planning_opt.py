@@ -250,6 +250,25 @@ def test_stall_escape_moves_along_the_level_set_and_keeps_the_constraint(model) 
     )
 
 
+def test_an_arm_held_at_its_goal_against_a_peer_yields_then_returns(model) -> None:
+    rng = np.random.default_rng(7)
+    robot = CELL.arm(OWN).robot
+    settings = PlannerSettings(deadline=1.0, stall_ticks=5, yield_ticks=8)
+    planner = NehmoPlanner(CELL, OWN, [model], settings)
+    while True:  # the own arm at its goal, the peer pressing it (V row within stall_margin)
+        q1, q2 = sample_configuration(robot, rng), sample_configuration(robot, rng)
+        problem = planner._problem(np.zeros(6), planner._current(q1, {PEER: q2}))
+        c_still, _ = problem.constraints.evaluate(np.zeros(6))
+        if 0.0 <= c_still[0] < 0.005:
+            break
+    run = _closed_loop(planner, q1, q2, q1.copy(), 40)
+    flags = [r.telemetry.escaping for _, r in run]
+    assert not any(flags[:5]) and flags[5:13] == [True] * 8  # yields after stall_ticks
+    v = [model.evaluate(0.1, np.concatenate([q, q2])[None])[0][0] for q, _ in run]
+    assert v[13] > v[5] + 0.005  # it made room: V against the peer grew while yielding
+    assert np.linalg.norm(run[-1][0] - q1) < np.linalg.norm(run[13][0] - q1)  # and went back
+
+
 def test_paper_preset_and_kind_have_no_escape(model) -> None:
     assert PlannerSettings().escape
     assert not PlannerSettings.preset("paper").escape
