@@ -155,7 +155,7 @@ def _cell(summary: dict[str, Any], system: str, variant: str, budget: str) -> st
         return "·"
     text = f"{entry['mean_abs_error_T']:.4f}"
     if len(entry["seeds"]) > 1:
-        text += f" ± {entry['std']:.3f}"
+        text += f" ± {entry['std']:.4f}"
     return text
 
 
