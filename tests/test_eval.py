@@ -347,3 +347,19 @@ def test_nehmo_wrap_kind_wraps_the_goal_and_uses_the_bc_sym_model() -> None:
     q[0] = -np.pi + 0.1
     far = {"ur5_1": np.array([3.0, -1.6, 1.5, -1.6, -1.5, 0.0])}
     assert wrapped.plan(q, far, goal).velocity[0] < 0 < plain.plan(q, far, goal).velocity[0]
+
+
+def test_planner_setting_overrides_are_typed_and_checked() -> None:
+    from nehmo_core.eval.cli import parse_settings
+
+    assert parse_settings(["t_plan=0.08", "escape=false", "stall_ticks=20"]) == {
+        "t_plan": 0.08,
+        "escape": False,
+        "stall_ticks": 20,
+    }
+    with pytest.raises(InvalidValueError, match="`--planner-setting`.*t_safe"):
+        parse_settings(["tplan=0.08"])  # unknown key: the valid ones are listed
+    with pytest.raises(InvalidValueError, match="escape must be true or false"):
+        parse_settings(["escape=maybe"])
+    with pytest.raises(InvalidValueError, match="stall_ticks must be an integer"):
+        parse_settings(["stall_ticks=1.5"])

@@ -107,9 +107,8 @@ def parse_settings(items: list[str]) -> dict[str, object]:
             else:
                 out[key] = kind(text)
         except ValueError:
-            raise InvalidValueError(
-                "--planner-setting", f"{key} must be a {kind.__name__}", text
-            ) from None
+            what = {bool: "true or false", int: "an integer", float: "a number"}.get(kind, "text")
+            raise InvalidValueError("--planner-setting", f"{key} must be {what}", text) from None
     return out
 
 
