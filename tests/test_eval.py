@@ -357,7 +357,7 @@ def test_planner_setting_overrides_are_typed_and_checked() -> None:
         "escape": False,
         "stall_ticks": 20,
     }
-    with pytest.raises(InvalidValueError, match="`--planner-setting`.*t_safe"):
+    with pytest.raises(InvalidValueError, match=r"`--planner-setting`.*t_safe"):
         parse_settings(["tplan=0.08"])  # unknown key: the valid ones are listed
     with pytest.raises(InvalidValueError, match="escape must be true or false"):
         parse_settings(["escape=maybe"])
