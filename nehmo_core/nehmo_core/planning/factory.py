@@ -32,7 +32,7 @@ from nehmo_core.planning.chomp import ChompSettings, plan_chomp
 from nehmo_core.planning.interface import Planner
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.ompl_planner import OmplSettings, plan_rrt_connect
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.settings import PAPER_OPT, PlannerSettings
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots.model import Cell
 
@@ -57,7 +57,7 @@ def make_planner(
         if kind == "nehmo_wrap":
             settings = (settings or PlannerSettings()).replace(wrap_goal=True)
         if kind == "nehmo_paper":
-            settings = (settings or PlannerSettings()).replace(self_clearance=False, escape=False)
+            settings = (settings or PlannerSettings()).replace(**PAPER_OPT)
         return NehmoPlanner(cell, arm_id, models, settings)
     if kind in ("naive", "reckless"):
         return NaivePlanner(cell, arm_id, settings, reckless=kind == "reckless")

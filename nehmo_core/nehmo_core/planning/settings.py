@@ -7,15 +7,18 @@ from typing import Any
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 
-__all__ = ["SOLVERS", "PlannerSettings"]
+__all__ = ["PAPER_OPT", "SOLVERS", "PlannerSettings"]
 
 SOLVERS = ("sqp", "ipopt")
 """``sqp``: the exact active-set SQP of :mod:`nehmo_core.planning.sqp` (fast);
 ``ipopt``: IPOPT through CasADi, the authors' setting (the reference)."""
 
+PAPER_OPT: dict[str, Any] = {"self_clearance": False, "escape": False}
+"""What the paper's Opt leaves out of NeHMO's defaults (the ``paper`` preset, ``nehmo_paper``)."""
+
 _PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
-    "paper": {"self_clearance": False, "escape": False},
+    "paper": PAPER_OPT,
     "ipopt": {"solver": "ipopt"},
     "wrapped_goal": {"wrap_goal": True},
 }
