@@ -304,3 +304,34 @@ def test_ompl_rrt_connect_finds_a_collision_free_path() -> None:
             assert not world.in_collision(self_collision=False)
     for a in cell.arm_ids:
         assert np.abs(cell.arm(a).robot.wrap(q[a] - scenario.goal[a])).max() < 1e-3
+
+
+def test_ompl_paths_keep_their_clearance_and_endpoints_may_lower_it() -> None:
+    from nehmo_core.planning.ompl_planner import OmplSettings, plan_rrt_connect
+
+    cell = load_cell("dual_ur5")
+    scenario = sample_scenario(cell, np.random.default_rng(4))
+    with pytest.raises(InvalidValueError, match="clearance"):
+        OmplSettings(clearance=-0.01)
+    with CellWorld(cell) as world:
+
+        def closest(q: Mapping[str, np.ndarray]) -> float:
+            world.set_configuration(q)
+            return min([0.05, *(c.distance for c in world.collisions(margin=0.05))])
+
+        ends = min(closest(scenario.start), closest(scenario.goal))
+        for setting in (0.01, 2.0 * ends):  # the second is above an endpoint's distance
+            expected = setting if ends >= setting else 0.5 * ends
+            result = plan_rrt_connect(
+                cell, scenario.start, scenario.goal, OmplSettings(20.0, clearance=setting), world
+            )
+            assert result.solved
+            assert result.clearance == pytest.approx(expected, rel=1e-3)  # PyBullet distances
+        path = np.concatenate([result.waypoints[a] for a in cell.arm_ids], axis=1)
+        dense = [
+            closest({"ur5_0": q[:6], "ur5_1": q[6:]})
+            for a, b in zip(path[:-1], path[1:], strict=True)
+            for q in (a + s * (b - a) for s in np.linspace(0.0, 1.0, 11))  # ≤ 0.01 rad apart
+        ]
+        # checked states keep the clearance; between checks (0.02 rad) a link moves mm at most
+        assert min(dense) > 0.5 * result.clearance
