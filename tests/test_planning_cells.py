@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping
 
@@ -330,7 +331,7 @@ def test_ompl_paths_keep_their_clearance_and_endpoints_may_lower_it() -> None:
         path = np.concatenate([result.waypoints[a] for a in cell.arm_ids], axis=1)
         dense = [
             closest({"ur5_0": q[:6], "ur5_1": q[6:]})
-            for a, b in zip(path[:-1], path[1:], strict=True)
+            for a, b in itertools.pairwise(path)
             for q in (a + s * (b - a) for s in np.linspace(0.0, 1.0, 11))  # ≤ 0.01 rad apart
         ]
         # checked states keep the clearance; between checks (0.02 rad) a link moves mm at most
