@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
+import casadi as ca
 import numpy as np
 import pytest
 import torch
@@ -188,3 +192,48 @@ def test_falls_back_to_the_vm_without_a_compiler(tmp_path, monkeypatch) -> None:
     with pytest.raises(UnknownNameError, match="auto"):
         compile_function(value_grad, "jit")
     assert codegen.BACKENDS == ("auto", "compiled", "vm")
+
+
+def _source(fn: ca.Function, tmp_path: Path) -> str:
+    cg = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False, "verbose": False})
+    cg.add(fn)
+    cg.generate(str(tmp_path) + os.sep)
+    return codegen._patch_kernel((tmp_path / f"{fn.name()}.c").read_text())
+
+
+@pytest.mark.parametrize(("float32", "gradient"), [(False, False), (True, False), (True, True)])
+def test_compact_weights_only_touches_exact_float32_constants_read_once(
+    float32: bool, gradient: bool, tmp_path
+) -> None:
+    weights = np.random.default_rng(0).normal(size=(32, 64))
+    if float32:
+        weights = weights.astype(np.float32).astype(np.float64)
+    x = ca.MX.sym("x", 1, 32)
+    y = ca.sin(ca.mtimes(x, ca.DM(weights)))
+    # with the gradient, CasADi transposes the constant at run time through the same pointer,
+    # so it must stay double
+    outputs = [y, ca.gradient(ca.sum2(y), x)] if gradient else [y]
+    fn = ca.Function(f"tiny_{float32}_{gradient}", [x], outputs)
+    source = _source(fn, tmp_path)
+    compacted, counts = codegen.compact_weights(source)
+    touched = float32 and not gradient
+    assert counts == {"float": int(touched), "removed": 0}
+    assert (compacted != source) == touched
+    compiled = compile_function(fn, "compiled").function
+    for xi in np.random.default_rng(1).normal(size=(5, 1, 32)):
+        for a, b in zip(compiled.call([xi]), fn.call([xi]), strict=True):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-13)
+
+
+def test_compiled_shipped_model_stores_each_weight_once_and_matches_the_vm(tmp_path) -> None:
+    _, value_grad = value_functions(load_value_function("ur5_ur5", variant="bc+sym"), "ship")
+    source = _source(value_grad, tmp_path)
+    compacted, counts = codegen.compact_weights(source)
+    # every large matrix of the distance MLP and the SIREN is written as W and Wᵀ by CasADi
+    assert counts["float"] >= 4 and counts["removed"] >= 4
+    assert len(compacted) < 0.6 * len(source)
+    compiled = compile_function(value_grad, "compiled").function
+    for tau, xi in zip((0.0, 0.2, 0.6), _states(12, 3, 8), strict=True):
+        (v, g), (v_ref, g_ref) = compiled(tau, xi), value_grad(tau, xi)
+        np.testing.assert_allclose(float(v), float(v_ref), rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(np.asarray(g), np.asarray(g_ref), rtol=1e-10, atol=1e-12)
