@@ -9,7 +9,10 @@ of the arm with that many peers: median, p95 and max of the plan() wall time, so
 and fail-safe rate; the time of one batched ``V``/``∇V`` evaluation of all its peers (the floor
 any solver pays at least once per step) and the ratio to it; CHOMP's centralized plan time on the
 same scenarios and its ratio to NeHMO's per-step time; and IPOPT (the authors' solver) per step
-on the dual cell for reference.
+on the dual cell for reference. The generated C stores each weight matrix once, as float
+(``codegen.compact_weights``); the same evaluation with CasADi's own layout (every matrix twice,
+as double) runs beside it, as a floor per peer count and as a full ``nehmo`` row on the dual
+cell (``nehmo, CasADi layout``).
 
 Value model: the shipped ``ur5_ur5`` ``bc+sym`` value function (``--model random`` for a
 SIREN 3×128 with random weights: speed does not depend on the weights, but the constraint's
@@ -30,6 +33,7 @@ import json
 import os
 import platform
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +44,9 @@ import torch
 
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr import load_value_function
+from nehmo_core.hjr.casadi_export import value_functions
 from nehmo_core.planning.chomp import plan_chomp
+from nehmo_core.planning.codegen import compile_function
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.synthetic import planning_distance_model, random_value_function
@@ -129,6 +135,10 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
         vf = random_value_function("ur5_ur5", "bc+sym")
         description = "bc+sym SIREN 3x128, random weights (residual x0.05)"
     model = PairValueModel.from_value_function(vf, "bench_ur5_ur5_bcsym")
+    _, graph = value_functions(vf, "bench_ur5_ur5_bcsym")
+    plain = replace(
+        model, value_grad=compile_function(graph, "compiled", compact=False).function, _calls={}
+    )
     report: dict[str, Any] = {
         "machine": platform.processor() or platform.machine(),
         "cpu_count": os.cpu_count(),
@@ -142,10 +152,15 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
         "cases": {},
     }
     chomp: dict[str, list[float]] = {}
-    for (cell_name, arm, peers), (kind, settings) in itertools.product(CASES, VARIANTS.items()):
+    runs = [
+        (case, kind, settings, model)
+        for case, (kind, settings) in itertools.product(CASES, VARIANTS.items())
+    ]
+    runs.insert(1, (CASES[0], "nehmo, CasADi layout", VARIANTS["nehmo"], plain))
+    for (cell_name, arm, peers), kind, settings, used in runs:
         cell = load_cell(cell_name)
         chosen = _scenarios(cell_name, scenarios, 200)
-        planners = {a: NehmoPlanner(cell, a, [model], settings) for a in cell.arm_ids}
+        planners = {a: NehmoPlanner(cell, a, [used], settings) for a in cell.arm_ids}
         assert len(planners[arm].pairs) == peers
         # as the planner nodes do after start-up: long-lived objects out of the collector's
         # reach, so a full collection does not land inside a timed step
@@ -164,7 +179,7 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
                 plan_chomp(cell, scenario.start, scenario.goal).plan_time for scenario in chosen
             ]
         chomp_times = chomp[cell_name]
-        floor = _floor(model, peers)
+        floor = _floor(used, peers)
         stats = _stats(times)
         counts = {k: statuses.count(k) for k in sorted(set(statuses))}
         constrained = [t for t, s in zip(times, statuses, strict=True) if s != "naive"]
@@ -186,6 +201,7 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
             "fail_safe_rate": float(np.mean([s not in ("naive", "optimal") for s in statuses])),
             "p95_over_median": stats["p95_ms"] / stats["median_ms"],
             "floor_batched_v_grad_ms": floor * 1e3,
+            "floor_casadi_layout_ms": _floor(plain, peers) * 1e3,
             "median_over_floor": stats["median_ms"] / (floor * 1e3),
             "chomp_plan_median_s": float(np.median(chomp_times)),
             "chomp_over_nehmo_step": float(np.median(chomp_times)) / (stats["median_ms"] / 1e3),
@@ -230,7 +246,17 @@ def markdown(report: dict[str, Any]) -> str:
             f"{c['chomp_plan_median_s']:.2f} | {c['chomp_over_nehmo_step']:.0f} |"
         )
     ip = report["ipopt_dual_one_scenario"]
+    floors = {c["peers"]: c for c in report["cases"].values() if c["planner"] == "nehmo"}
     lines += [
+        "",
+        "One batched V/∇V evaluation, float weights stored once vs CasADi's layout (every "
+        "matrix twice, as double): "
+        + "; ".join(
+            f"{p} peer(s) {c['floor_batched_v_grad_ms']:.3f} vs {c['floor_casadi_layout_ms']:.3f} "
+            f"ms ({c['floor_casadi_layout_ms'] / c['floor_batched_v_grad_ms']:.1f}×)"
+            for p, c in sorted(floors.items())
+        )
+        + ".",
         "",
         f"IPOPT (authors' settings) on one dual-UR5 scenario: median {ip['median_ms']:.1f} ms, "
         f"p95 {ip['p95_ms']:.1f} ms per step; statuses {ip['statuses']}.",

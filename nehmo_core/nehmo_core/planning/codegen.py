@@ -279,14 +279,14 @@ def compact_weights(source: str) -> tuple[str, dict[str, int]]:
     return out, {"float": len(consts) - len(transposed), "removed": len(transposed)}
 
 
-def _key(fn: ca.Function, compiler: str) -> str:
+def _key(fn: ca.Function, compiler: str, compact: bool = True) -> str:
     h = hashlib.sha256()
     parts = (
         fn.serialize(),
         ca.CasadiMeta.version(),
         compiler,
         " ".join(CFLAGS),
-        _CODEGEN_VERSION,
+        _CODEGEN_VERSION + ("" if compact else "-plain"),
         _cpu(),
     )
     for part in parts:
@@ -295,7 +295,7 @@ def _key(fn: ca.Function, compiler: str) -> str:
     return h.hexdigest()[:20]
 
 
-def _build(fn: ca.Function, compiler: str, target: Path) -> None:
+def _build(fn: ca.Function, compiler: str, target: Path, compact: bool = True) -> None:
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
         source = f"{fn.name()}.c"
@@ -303,15 +303,21 @@ def _build(fn: ca.Function, compiler: str, target: Path) -> None:
         cg.add(fn)
         cg.generate(tmp + os.sep)
         path = Path(tmp) / source
-        path.write_text(compact_weights(_patch_kernel(path.read_text()))[0])
+        text = _patch_kernel(path.read_text())
+        path.write_text(compact_weights(text)[0] if compact else text)
         library = Path(tmp) / "lib.so"
         cmd = [compiler, *CFLAGS, str(Path(tmp) / source), "-o", str(library), "-lm"]
         subprocess.run(cmd, check=True, capture_output=True, text=True)
         os.replace(library, target)  # atomic: concurrent builders never see a partial file
 
 
-def compile_function(fn: ca.Function, backend: str = "auto") -> CompiledFunction:
-    """Evaluate ``fn`` through cached generated C (``backend`` in :data:`BACKENDS`)."""
+def compile_function(
+    fn: ca.Function, backend: str = "auto", compact: bool = True
+) -> CompiledFunction:
+    """Evaluate ``fn`` through cached generated C (``backend`` in :data:`BACKENDS`).
+
+    ``compact=False`` keeps CasADi's weight layout (for comparisons: same results, slower).
+    """
     if backend not in BACKENDS:
         raise UnknownNameError("backend", backend, BACKENDS)
     if backend == "vm":
@@ -320,9 +326,9 @@ def compile_function(fn: ca.Function, backend: str = "auto") -> CompiledFunction
     try:
         if compiler is None:
             raise FileNotFoundError("no C compiler (gcc or cc) on PATH")
-        target = cache_dir() / "casadi" / f"{fn.name()}_{_key(fn, compiler)}.so"
+        target = cache_dir() / "casadi" / f"{fn.name()}_{_key(fn, compiler, compact)}.so"
         if not target.exists():
-            _build(fn, compiler, target)
+            _build(fn, compiler, target, compact)
         return CompiledFunction(ca.external(fn.name(), str(target)), "compiled", target)
     except (OSError, subprocess.CalledProcessError, RuntimeError) as exc:
         if backend == "compiled":
