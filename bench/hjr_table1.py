@@ -61,10 +61,13 @@ SHORTFALL = {
     "two_link": (
         "  Why: the error grows with τ (the PDE residual left at the end of training "
         "integrates over the horizon); at τ = 0.5 s, where the authors validate the two-link "
-        "pair, it is under the bar. Three two-link-specific changes to the Air3D-tuned `cpu` "
-        "preset did not help at 40M (`hjr_tuning.md` #18–#19): batch 250 0.0147, curriculum "
-        "over 0.3 of the steps 0.0123; width 128 diverged to 5× the loss by 26M and was "
-        "stopped. One 40M two-link run takes ~21 min on a quiet core."
+        "pair, it is under the bar. Six two-link-specific changes to the Air3D-tuned `cpu` "
+        "preset, one at a time, did not help at 40M (`hjr_tuning.md` #18–#22): batch 250 "
+        "0.0147, curriculum over 0.3 of the steps 0.0123, ω0 = 15 0.0117, learning rate 1e-4 "
+        "0.0120, 4 hidden layers 0.0126; width 128 diverged to 5× the loss by 26M and was "
+        "stopped. The grid is not the limit: against finer ground truths the three seeds "
+        "score 0.0121–0.0125 (31⁴), 0.0114–0.0118 (41⁴), 0.0111–0.0114 (51⁴). One 40M "
+        "two-link run takes ~21 min on a quiet core."
     ),
 }
 COLOR = {"deepreach": "tab:gray", "bc": "tab:blue", "bc+sym": "tab:red"}

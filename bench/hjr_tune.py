@@ -90,6 +90,7 @@ def _describe(settings: dict[str, Any]) -> str:
         f"{net['hidden_layers']}×{net['width']}, b {settings['batch_size']}, "
         f"lr {settings['learning_rate']:g} {settings.get('lr_schedule', 'constant')}, "
         f"pre {settings['pretrain_fraction']:.3g}, cur {settings['curriculum_fraction']:.3g}"
+        + (f", ω0 {net['omega0']:g}" if net.get("omega0", 30.0) != 30.0 else "")
     )
 
 
