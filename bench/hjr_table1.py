@@ -66,7 +66,7 @@ SHORTFALL = {
         "0.0147, curriculum over 0.3 of the steps 0.0123, ω0 = 15 0.0117, learning rate 1e-4 "
         "0.0120, 4 hidden layers 0.0126; width 128 diverged to 5× the loss by 26M and was "
         "stopped. The grid is not the limit: against finer ground truths the three seeds "
-        "score 0.0121–0.0125 (31⁴), 0.0114–0.0118 (41⁴), 0.0111–0.0114 (51⁴). One 40M "
+        "score 0.0121–0.0125 (31⁴), 0.0114–0.0118 (41⁴), 0.0110–0.0114 (51⁴). One 40M "
         "two-link run takes ~21 min on a quiet core."
     ),
 }
