@@ -250,6 +250,30 @@ def test_stall_escape_moves_along_the_level_set_and_keeps_the_constraint(model) 
     )
 
 
+def test_escape_length_doubles_until_the_goal_error_reaches_a_new_low(model) -> None:
+    settings = PlannerSettings(stall_ticks=3, escape_ticks=4, stall_progress=0.1)
+    planner = NehmoPlanner(CELL, OWN, [model], settings)
+    step = settings.t_plan * settings.u_max  # 0.05 rad; progress means > 0.005 rad per call
+
+    def feed(errors: list[float]) -> list[int]:
+        left = []
+        for e in errors:
+            planner._track_stall(np.array([e, 0, 0, 0, 0, 0]), pressed=True)
+            left.append(planner._escape_left)
+        return left
+
+    feed([1.0, 0.9])  # progress toward a new low
+    assert feed([0.9, 0.9, 0.9]) == [0, 0, 4]  # stalled for stall_ticks calls: escape 4 calls
+    assert feed([1.0, 1.1, 1.2, 1.2]) == [3, 2, 1, 0]
+    # back to the trap, making progress on the way but never below the best error (0.9)
+    assert feed([1.1, 1.0, 0.9, 0.9, 0.9, 0.9]) == [0, 0, 0, 0, 0, 8]  # same trap: 2× longer
+    feed([1.2] * 8)
+    assert feed([1.1, 1.0, 0.9, 0.9, 0.9, 0.9]) == [0, 0, 0, 0, 0, 16]  # 4×, the cap
+    feed([1.2] * 16)
+    feed([1.0, 0.8, 0.7])  # a new low: the next trap starts over
+    assert feed([0.7, 0.7, 0.7]) == [0, 0, 4]
+
+
 def test_an_arm_held_at_its_goal_against_a_peer_yields_then_returns(model) -> None:
     rng = np.random.default_rng(7)
     robot = CELL.arm(OWN).robot

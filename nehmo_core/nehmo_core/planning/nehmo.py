@@ -15,11 +15,11 @@ to the goal, so an arm whose goal lies behind a peer's level set stops where the
 meets the constraint (a local minimum on the safe set). After ``stall_ticks`` calls without
 progress against an active V row, the arm swaps its goal cost for a target step along a random
 direction projected onto the tangent space of the critical pair's level set, for
-``escape_ticks`` calls (doubled, up to 4×, when it stalls again without any progress in
-between), then heads for the goal again. An arm held at its goal against a peer's constraint for
-``stall_ticks`` calls yields: for ``yield_ticks`` calls it steps up V's gradient of the critical
-pair (making room for a peer that may be stuck behind it), then returns. Every escape step is an
-Opt solution with the same constraints, so safety is unchanged.
+``escape_ticks`` calls (doubled, up to 4×, when it stalls again before its goal error has
+reached a new low), then heads for the goal again. An arm held at its goal against a peer's
+constraint for ``stall_ticks`` calls yields: for ``yield_ticks`` calls it steps up V's gradient
+of the critical pair (making room for a peer that may be stuck behind it), then returns. Every
+escape step is an Opt solution with the same constraints, so safety is unchanged.
 """
 
 from __future__ import annotations
@@ -162,11 +162,12 @@ class NehmoPlanner:
         seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape_seed
         self._rng = np.random.default_rng(seed)
         self._stall = 0  # consecutive calls without progress against an active V row
-        self._escapes = 0  # escapes since the last progress toward the goal
+        self._escapes = 0  # escapes since the goal error last reached a new low
         self._escape_left = 0  # calls left in the current escape
         self._escape_dir = np.zeros(self.robot.dof)
         self._yielding = False  # the current escape gives way at the goal
         self._last_error = math.inf
+        self._best_error = math.inf
 
     # -- stall escape -------------------------------------------------------------------------
     def _escape_error(self, now: _Peers) -> np.ndarray:
@@ -194,13 +195,15 @@ class NehmoPlanner:
         step = s.t_plan * s.u_max
         progressed = self._last_error - e > s.stall_progress * step
         self._last_error = e
+        if self._best_error - e > s.stall_progress * step:
+            # closer than ever before: a stall from here on is a new trap, not the same one
+            self._best_error = e
+            self._escapes = 0
         if self._escape_left > 0:
             self._escape_left -= 1
             return
         if not pressed or (progressed and e >= step):
             self._stall = 0
-            if progressed:
-                self._escapes = 0
             return
         self._stall += 1
         if self._stall < s.stall_ticks:

@@ -54,9 +54,9 @@ class PlannerSettings:
     # stall escape (not in the paper's Opt): after stall_ticks plan() calls in which the goal
     # error fell by less than stall_progress·t_plan·ū while a V row was within stall_margin [m]
     # of ε, the arm follows a random direction tangent to the critical pair's level set of V
-    # for escape_ticks calls (longer if it stalls again without progress), then heads for the
-    # goal again; an arm held at its goal that long yields: it steps up V's gradient for
-    # yield_ticks calls
+    # for escape_ticks calls (longer if it stalls again before a new lowest goal error), then
+    # heads for the goal again; an arm held at its goal that long yields: it steps up V's
+    # gradient for yield_ticks calls
     escape: bool = True
     stall_ticks: int = 12
     escape_ticks: int = 25
