@@ -336,3 +336,25 @@ def test_ompl_paths_keep_their_clearance_and_endpoints_may_lower_it() -> None:
         ]
         # checked states keep the clearance; between checks (0.02 rad) a link moves mm at most
         assert min(dense) > 0.5 * result.clearance
+
+
+def test_chomp_check_reports_self_collisions() -> None:
+    from nehmo_core.planning.chomp import _collision_free
+
+    cell = load_cell("dual_ur5")
+    robot = cell.arm("ur5_0").robot
+    rng = np.random.default_rng(0)
+    upright = np.array([0.0, -np.pi / 2, 0.0, -np.pi / 2, 0.0, 0.0])
+    with CellWorld(cell) as world:
+        low, high = np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi)
+        for _ in range(5000):  # ur5_0 folded into itself, clear of an upright ur5_1
+            q = rng.uniform(low, high)
+            world.set_configuration({"ur5_0": q, "ur5_1": upright})
+            hits = world.collisions()
+            if hits and all(c.arm_a == c.arm_b == "ur5_0" for c in hits):
+                break
+        else:
+            pytest.fail("no self-colliding configuration found")
+        trajs = [np.stack([q, q]), np.stack([upright, upright])]
+        assert not world.in_collision(self_collision=False)
+        assert not _collision_free(world, cell, trajs, 2)

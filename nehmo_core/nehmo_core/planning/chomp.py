@@ -17,7 +17,9 @@ joints unwrapped to the shortest angle), initialized by a minimum-jerk (quintic)
   iterations after the sphere model first reports no potential above ``collision_threshold``, or
   at ``planning_time_limit``.
 - The result is checked exactly on the arms' collision geometry (PyBullet), at the waypoints and
-  between them.
+  between them, arm against arm and each arm against itself. The obstacle cost models only the
+  other arms, so a trajectory may fold an arm into itself; the check reports it (Table II's
+  CHOMP collisions on dual UR5 are all of this kind).
 """
 
 from __future__ import annotations
@@ -171,10 +173,10 @@ def _collision_free(world: CellWorld, cell: Cell, trajs: list[np.ndarray], subst
                     for a, t in zip(cell.arms, trajs, strict=True)
                 }
             )
-            if world.in_collision(self_collision=False):
+            if world.in_collision():
                 return False
     world.set_configuration({a.arm_id: t[-1] for a, t in zip(cell.arms, trajs, strict=True)})
-    return not world.in_collision(self_collision=False)
+    return not world.in_collision()
 
 
 def plan_chomp(
