@@ -65,7 +65,11 @@ SHORTFALL = {
         "preset, one at a time, did not help at 40M (`hjr_tuning.md` #18–#22): batch 250 "
         "0.0147, curriculum over 0.3 of the steps 0.0123, ω0 = 15 0.0117, learning rate 1e-4 "
         "0.0120, 4 hidden layers 0.0126; width 128 diverged to 5× the loss by 26M and was "
-        "stopped. The grid is not the limit: against finer ground truths the three seeds "
+        "stopped. The Dirichlet weight does matter: at 10 instead of 40 (the only change), "
+        "the two-link pair reaches 0.0095 ± 0.0001 over seeds 0, 1, 2 (0.0094, 0.0095, "
+        "0.0095) at τ = T (`hjr_tuning.md` #24–#26), under the bar; the table above keeps "
+        "the `cpu` preset for every cell. The grid is not the limit: against finer ground "
+        "truths the three seeds "
         "score 0.0121–0.0125 (31⁴), 0.0114–0.0118 (41⁴), 0.0110–0.0114 (51⁴). One 40M "
         "two-link run takes ~21 min on a quiet core."
     ),

@@ -91,6 +91,12 @@ def _describe(settings: dict[str, Any]) -> str:
         f"lr {settings['learning_rate']:g} {settings.get('lr_schedule', 'constant')}, "
         f"pre {settings['pretrain_fraction']:.3g}, cur {settings['curriculum_fraction']:.3g}"
         + (f", ω0 {net['omega0']:g}" if net.get("omega0", 30.0) != 30.0 else "")
+        + (
+            f", Dirichlet {settings['dirichlet_weight']:g}"
+            if settings["dirichlet_weight"] != 40
+            else ""
+        )
+        + (f", seed {settings['seed']}" if settings.get("seed", 0) else "")
     )
 
 
