@@ -30,6 +30,7 @@ import argparse
 import gc
 import itertools
 import json
+import math
 import os
 import platform
 import time
@@ -56,7 +57,11 @@ from nehmo_core.sim.scenarios import Scenario, sample_scenario
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CASES = (("dual_ur5", "ur5_0", 1), ("triple_ur5", "ur5_0", 2), ("five_ur5", "ur5_0", 4))
-VARIANTS = {"nehmo": PlannerSettings(), "nehmo_paper": PlannerSettings.preset("paper")}
+VARIANTS = {
+    "nehmo": PlannerSettings(),
+    "nehmo, tight SQP": PlannerSettings(sqp_tol=1e-7, sqp_screen=math.inf),
+    "nehmo_paper": PlannerSettings.preset("paper"),
+}
 
 
 def _naive_collides(world: CellWorld, scenario: Scenario, steps: int) -> bool:

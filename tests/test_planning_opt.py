@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -167,8 +168,84 @@ def test_sqp_returns_the_ipopt_solution(model: PairValueModel) -> None:
         # IPOPT ends ~1e-8 inside the infeasible side of its bound; the costs agree to that.
         assert abs(problem.cost(fast.y) - problem.cost(ref.y)) <= 1e-6 * (1.0 + problem.cost(ref.y))
         assert fast.constraint.min() >= -1e-9
+        # the default tolerance (1e-5 rad on the last step) lands within it of the solution
+        default = solve_sqp(problem, np.zeros(6))
+        assert default.status == "optimal"
+        np.testing.assert_allclose(default.y, fast.y, atol=1e-5)
+        assert default.constraint.min() >= -1e-7
         compared += 1
     assert compared >= 5
+
+
+def _multi_peer_problems(
+    model: PairValueModel, seed: int, count: int, two_contacts: bool = False
+) -> list[OptProblem]:
+    """Centre arm of the five-UR5 cell (four peers), the naive step breaking a V row while
+    another row holds at it. The goal pushes the arm down the gradient of its most critical
+    pair, or (``two_contacts``) of its two most critical pairs at once, so the solution may
+    slide along one level set into the other."""
+    five = load_cell("five_ur5")
+    planner = NehmoPlanner(five, "ur5_0", [model])
+    assert len(planner.pairs) == 4
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(20000):
+        q = {a: sample_configuration(five.arm(a).robot, rng) for a in five.arm_ids}
+        now = planner._current(q["ur5_0"], q)
+        first, second = np.argsort(now.values)[:2]
+        if now.values[first] < 0.06 or now.values[second if two_contacts else first] > 0.25:
+            continue
+        g = now.grads[first][:6] / np.linalg.norm(now.grads[first][:6])
+        if two_contacts:
+            g = g + now.grads[second][:6] / np.linalg.norm(now.grads[second][:6])
+        problem = planner._problem(rng.uniform(0.3, 1.5) * g / np.abs(g).max(), now)
+        c, _ = problem.constraints.evaluate(problem.naive_step())
+        if c.min() < 0.0 and c.max() >= 0.0:
+            out.append(problem)
+            if len(out) == count:
+                return out
+    raise AssertionError(f"found only {len(out)} of {count} multi-peer problems")
+
+
+@pytest.mark.parametrize(("screen", "two_contacts"), [(0.1, False), (0.1, True), (1e-9, True)])
+def test_screened_sqp_returns_the_solution_of_the_whole_problem(
+    model, screen, two_contacts
+) -> None:
+    """Rows far from active at the naive step are left out of the iterations and checked at the
+    end; with a near-zero margin only the rows broken at the naive step are carried, so the
+    check must bring others back. Either way the answer is that of the whole problem."""
+    rejoined = compared = 0
+    for problem in _multi_peer_problems(model, 9, 80 if two_contacts else 40, two_contacts):
+        whole = solve_sqp(problem, np.zeros(6), tol=1e-9, screen=None)
+        screened = solve_sqp(problem, np.zeros(6), tol=1e-9, screen=screen)
+        assert screened.status == whole.status
+        if whole.status != "optimal":
+            continue
+        compared += 1
+        np.testing.assert_allclose(screened.y, whole.y, atol=1e-6)
+        assert len(screened.constraint) == problem.constraints.count
+        assert screened.constraint.min() >= -1e-7
+        # would the rows carried at first have sufficed? (solve only those, check the rest)
+        c_naive, _ = problem.constraints.evaluate(problem.naive_step())
+        rows = problem.constraints.value_count
+        kept = c_naive[:rows] < screen
+        alone = solve_sqp(
+            replace(problem, constraints=problem.constraints.subset(kept)),
+            np.zeros(6),
+            tol=1e-9,
+            screen=None,
+        )
+        c_alone, _ = problem.constraints.evaluate(alone.y)
+        rejoined += bool((c_alone[:rows][~kept] < -1e-7).any())
+    assert compared >= 20
+    if screen < 0.01:
+        assert rejoined >= 1  # the check after the reduced solve had rows to bring back
+
+
+def test_sqp_screen_setting_is_validated() -> None:
+    with pytest.raises(InvalidValueError, match="sqp_screen"):
+        PlannerSettings(sqp_screen=0.0)
+    assert SqpSolver().screen == PlannerSettings().sqp_screen
 
 
 def test_default_ipopt_settings_agree_with_sqp_within_their_tolerance(model) -> None:

@@ -62,10 +62,11 @@ class OptSolver(Protocol):
 
 @dataclass(frozen=True)
 class SqpSolver:
-    """:func:`solve_sqp` with fixed tolerance and iteration limit."""
+    """:func:`solve_sqp` with fixed tolerance, iteration limit and screening margin."""
 
-    tol: float = 1e-7
+    tol: float = 1e-5
     max_iter: int = 30
+    screen: float | None = 0.1
 
     def __call__(
         self,
@@ -74,14 +75,16 @@ class SqpSolver:
         deadline: float,
         hessian: np.ndarray | None = None,
     ) -> SolveResult:
-        return solve_sqp(problem, y_start, self.tol, self.max_iter, deadline, hessian)
+        return solve_sqp(
+            problem, y_start, self.tol, self.max_iter, deadline, hessian, screen=self.screen
+        )
 
 
 def make_solver(settings: PlannerSettings) -> OptSolver:
     """The solver named by ``settings.solver``."""
     if settings.solver == "ipopt":
         return IpoptSolver(settings.ipopt_tol, settings.ipopt_max_iter, settings.deadline).solve
-    return SqpSolver(settings.sqp_tol, settings.sqp_max_iter)
+    return SqpSolver(settings.sqp_tol, settings.sqp_max_iter, settings.sqp_screen)
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,8 @@ Solvers return ``u = y / t_plan``.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -40,10 +41,26 @@ class Constraints:
     epsilon: float
     linear: SelfClearanceRows | None = None  # self-clearance rows A·y ≥ b, after the V rows
 
-    @property
+    @cached_property
     def count(self) -> int:
         extra = self.linear.count if self.linear is not None else 0
-        return sum(len(states) for _, states in self.groups) + extra
+        return self.value_count + extra
+
+    @cached_property
+    def value_count(self) -> int:
+        """The number of V rows (they come first, in group order)."""
+        return sum(len(states) for _, states in self.groups)
+
+    def subset(self, keep: np.ndarray) -> Constraints:
+        """The same constraints with only the V rows where ``keep`` (value_count,) is true
+        (the linear rows stay)."""
+        groups, start = [], 0
+        for index, states in self.groups:
+            mine = keep[start : start + len(states)]
+            start += len(states)
+            if mine.any():
+                groups.append((index, states[mine]))
+        return replace(self, groups=groups)
 
     def states(self, y: np.ndarray) -> list[np.ndarray]:
         out = []
@@ -55,17 +72,20 @@ class Constraints:
 
     def evaluate(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(c (m,), J (m, n1))``: ``c = V − ε`` and its gradient with respect to ``y``."""
-        values, jacobians = [], []
-        for (index, _), states in zip(self.groups, self.states(y), strict=True):
-            v, g = self.models[index].evaluate(self.t_safe, states)
-            values.append(v - self.epsilon)
-            jacobians.append(g[:, : len(y)])
-        if self.linear is not None and self.linear.count:
-            values.append(self.linear.A @ y - self.linear.b)
-            jacobians.append(self.linear.A)
-        if not values:
-            return np.zeros(0), np.zeros((0, len(y)))
-        return np.concatenate(values), np.concatenate(jacobians)
+        n = len(y)
+        c = np.empty(self.count)
+        J = np.empty((len(c), n))
+        k = 0
+        for index, states in self.groups:
+            v, g = self.models[index].evaluate(self.t_safe, states, own_step=y)
+            np.subtract(v, self.epsilon, out=c[k : k + len(v)])
+            J[k : k + len(v)] = g[:, :n]
+            k += len(v)
+        if k < len(c):
+            assert self.linear is not None
+            np.subtract(self.linear.A @ y, self.linear.b, out=c[k:])
+            J[k:] = self.linear.A
+        return c, J
 
 
 @dataclass(frozen=True)

@@ -67,14 +67,28 @@ class PlannerSettings:
     backend: str = "auto"  # evaluation of V, ∇V: generated C ("compiled") or CasADi's "vm"
     # SQP
     sqp_max_iter: int = 30
-    sqp_tol: float = 1e-7  # step and constraint tolerance, in step units t_plan·u [rad]
+    # converged when a step is below sqp_tol [rad] (in step units t_plan·u) at a point that
+    # breaks no constraint by more than 1e-7 m
+    sqp_tol: float = 1e-5
+    # with several peers the iterations carry only the V rows below sqp_screen [m] at the naive
+    # step; the rest are checked at the solution and join if broken (inf: every row throughout)
+    sqp_screen: float = 0.1
     sqp_warm_hessian: bool = True  # start BFGS from the previous tick's Hessian estimate
     # IPOPT (authors' settings)
     ipopt_tol: float = 1e-3
     ipopt_max_iter: int = 30
 
     def __post_init__(self) -> None:
-        for name in ("epsilon", "t_plan", "t_safe", "u_max", "d_max", "deadline", "sqp_tol"):
+        for name in (
+            "epsilon",
+            "t_plan",
+            "t_safe",
+            "u_max",
+            "d_max",
+            "deadline",
+            "sqp_tol",
+            "sqp_screen",
+        ):
             if not getattr(self, name) > 0:
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))
         if not self.t_plan < self.t_safe:

@@ -6,15 +6,16 @@
    Lagrangian Hessian approximation ``B`` (the cost's ``2I`` plus a damped BFGS correction for
    the constraints' curvature) exactly with DAQP (a dual active-set solver for small dense QPs),
    and accept the step with a backtracking line search on the ℓ₁ merit function.
-3. Stop when the step and the constraint violation are below ``tol`` (a KKT point, as IPOPT's);
-   report ``infeasible`` when a linearization has no feasible point and ``timeout`` when the
-   deadline passes.
+3. Stop when a QP step, or the full step just taken, is below ``tol`` at a point whose
+   constraint violation is below ``feasibility_tol`` (a KKT point, as IPOPT's); report
+   ``infeasible`` when a linearization has no feasible point and ``timeout`` when the deadline
+   passes.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import daqp
 import numpy as np
@@ -60,17 +61,25 @@ def qp_step(
     DAQP solves small dense QPs exactly (up to rounding) and treats the step box as simple
     bounds. ``B`` must be positive definite; the SQP keeps it so by damped BFGS.
     """
-    m = len(c)
-    upper = np.concatenate([hi, np.full(m, np.inf)])
-    lower = np.concatenate([lo, -c])
+    n, m = len(grad), len(c)
+    upper = np.empty(n + m)
+    lower = np.empty(n + m)
+    upper[:n], upper[n:] = hi, np.inf
+    lower[:n], lower[n:] = lo, -c
     p, _, flag, info = daqp.solve(B, grad, J, upper, lower)
     # DAQP's multipliers satisfy Bp + grad + [I; J]ᵀ lam = 0 with lam ≤ 0 on active lower bounds
-    lam = np.maximum(0.0, -np.asarray(info["lam"], dtype=np.float64)[len(grad) :])
+    lam = np.maximum(0.0, -np.asarray(info["lam"], dtype=np.float64)[n:])
     return QPStep(np.asarray(p, dtype=np.float64), lam, int(flag))
 
 
-def _merit(problem: OptProblem, y: np.ndarray, c: np.ndarray, rho: float) -> float:
-    return problem.cost(y) + rho * float(np.maximum(0.0, -c).sum())
+def _violation(c: np.ndarray) -> float:
+    """Total constraint violation ``Σ max(0, −cᵢ)``."""
+    return -float(c[c < 0.0].sum())
+
+
+def _shortfall(c: np.ndarray) -> float:
+    """Largest constraint violation ``max(0, −min c)``."""
+    return max(0.0, -float(c.min())) if len(c) else 0.0
 
 
 def _bfgs(B: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -80,67 +89,124 @@ def _bfgs(B: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
     if sBs <= 1e-18:
         return B
     sr = float(s @ r)
-    theta = 1.0 if sr >= 0.2 * sBs else 0.8 * sBs / (sBs - sr)
-    r = theta * r + (1.0 - theta) * Bs
-    return B - np.outer(Bs, Bs) / sBs + np.outer(r, r) / float(s @ r)
+    if sr < 0.2 * sBs:
+        theta = 0.8 * sBs / (sBs - sr)
+        r = theta * r + (1.0 - theta) * Bs
+        sr = float(s @ r)
+    return B - np.outer(Bs / sBs, Bs) + np.outer(r / sr, r)
 
 
 def solve_sqp(
     problem: OptProblem,
     y_start: np.ndarray,
-    tol: float = 1e-7,
+    tol: float = 1e-5,
     max_iter: int = 30,
     deadline: float = np.inf,
     hessian: np.ndarray | None = None,
+    feasibility_tol: float = 1e-7,
+    screen: float | None = 0.1,
 ) -> SolveResult:
     """Solve ``problem`` from ``y_start``; ``deadline`` is a ``time.perf_counter()`` instant.
 
+    Converged when a QP step, or a full step just taken, is no longer than ``tol`` [rad] in
+    every joint, at a point that violates no constraint by more than ``feasibility_tol`` [m].
     ``hessian`` warm-starts the Lagrangian Hessian approximation (e.g. the previous tick's);
     the default is the cost's ``2I``.
+
+    ``screen`` [m]: with several V rows, the iterations carry only those below ``screen`` at the
+    naive step (their values there are at hand), so each iteration evaluates fewer pairs. At a
+    solution of that smaller problem every V row is evaluated; rows it breaks join (with any
+    now below ``screen``) and the iterations go on from there. The answer is therefore a KKT
+    point of the whole problem, as without screening. ``None`` carries every row throughout.
     """
     cons = problem.constraints
     y = problem.naive_step()
-    c, J = cons.evaluate(y)
-    if np.all(c >= 0.0):
+    c, _ = cons.evaluate(y)
+    if _shortfall(c) == 0.0:
         return SolveResult(y, "naive", 0, c)
-    n, ymax = len(y), problem.y_max
-    y = np.clip(y_start, -ymax, ymax)
-    c, J = cons.evaluate(y)
+    n, ymax, rows = len(y), problem.y_max, cons.value_count
     B = 2.0 * np.eye(n) if hessian is None or hessian.shape != (n, n) else hessian.copy()
+    keep = np.ones(rows, dtype=bool)
+    if screen is not None and rows > 1:
+        keep = c[:rows] < screen
+    y = np.minimum(np.maximum(y_start, -ymax), ymax)
+    used = 0
+    while True:
+        if keep.all():
+            result = _iterate(problem, y, B, tol, max_iter - used, deadline, feasibility_tol)
+            return replace(result, iterations=used + result.iterations)
+        reduced = replace(problem, constraints=cons.subset(keep))
+        result = _iterate(reduced, y, B, tol, max_iter - used, deadline, feasibility_tol)
+        used += result.iterations
+        if not result.success:
+            full = np.full(cons.count, np.nan)  # rows screened out were not evaluated at y
+            full[np.concatenate([np.flatnonzero(keep), np.arange(rows, cons.count)])] = (
+                result.constraint
+            )
+            return replace(result, iterations=used, constraint=full)
+        y = result.y
+        c, _ = cons.evaluate(y)
+        broken = ~keep & (c[:rows] < -feasibility_tol)
+        if not broken.any():
+            return SolveResult(y, "optimal", used, c, result.hessian)
+        if used >= max_iter:
+            return SolveResult(y, "iteration_limit", used, c)
+        keep |= c[:rows] < screen
+        if result.hessian is not None:
+            B = result.hessian
+
+
+def _iterate(
+    problem: OptProblem,
+    y: np.ndarray,
+    B: np.ndarray,
+    tol: float,
+    max_iter: int,
+    deadline: float,
+    feasibility_tol: float,
+) -> SolveResult:
+    """SQP iterations on ``problem`` from ``y`` with Hessian approximation ``B``."""
+    cons, ymax, n = problem.constraints, problem.y_max, len(y)
+    error0 = problem.error0
+    c, J = cons.evaluate(y)
     rho = 1.0
     for iteration in range(1, max_iter + 1):
         if time.perf_counter() > deadline:
             return SolveResult(y, "timeout", iteration, c)
-        grad = 2.0 * (problem.error0 + y)
-        step = qp_step(B, grad, c, J, -ymax - y, ymax - y)
+        grad = 2.0 * (error0 + y)
+        lo, hi = -ymax - y, ymax - y
+        step = qp_step(B, grad, c, J, lo, hi)
         if not step.feasible and step.flag != -1:  # B lost definiteness to rounding: the cost's 2I
             B = 2.0 * np.eye(n)
-            step = qp_step(B, grad, c, J, -ymax - y, ymax - y)
+            step = qp_step(B, grad, c, J, lo, hi)
         if step.flag == -1:
             return SolveResult(y, "infeasible", iteration, c)
         if not step.feasible:
             return SolveResult(y, f"failed (QP exit flag {step.flag})", iteration, c)
         p, lam = step.p, step.lam
-        violation = float(np.maximum(0.0, -c).max(initial=0.0))
-        if np.abs(p).max() <= tol and violation <= tol:
+        step_size = max(float(p.max()), -float(p.min()))
+        low = float(c.min())
+        if step_size <= tol and -low <= feasibility_tol:
             return SolveResult(y, "optimal", iteration, c, B)
-        rho = max(rho, 1.5 * float(lam.max(initial=0.0)) + 1e-3)
-        merit = _merit(problem, y, c, rho)
-        slope = float(grad @ p) - rho * float(np.maximum(0.0, -c).sum())
+        if len(lam):
+            rho = max(rho, 1.5 * float(lam.max()) + 1e-3)
+        violation = _violation(c) if low < 0.0 else 0.0
+        merit = 0.25 * float(grad @ grad) + rho * violation  # ‖e₀ + y‖² = ¼‖grad‖²
+        slope = float(grad @ p) - rho * violation
         alpha = 1.0
         while True:
-            y_new = np.clip(y + alpha * p, -ymax, ymax)
+            y_new = np.minimum(np.maximum(y + alpha * p, -ymax), ymax)
             c_new, J_new = cons.evaluate(y_new)
-            if _merit(problem, y_new, c_new, rho) <= merit + 1e-4 * alpha * slope or alpha < 1e-3:
+            e = error0 + y_new
+            merit_new = float(e @ e) + rho * _violation(c_new)
+            if merit_new <= merit + 1e-4 * alpha * slope or alpha < 1e-3:
                 break
             alpha *= 0.5
-        lagrangian_change = 2.0 * (y_new - y) - (J_new - J).T @ lam
-        B = _bfgs(B, y_new - y, lagrangian_change)
+        s = y_new - y
+        B = _bfgs(B, s, 2.0 * s - lam @ (J_new - J))
         y, c, J = y_new, c_new, J_new
-        if (
-            alpha == 1.0
-            and np.abs(p).max() <= tol
-            and float(np.maximum(0.0, -c).max(initial=0.0)) <= tol
-        ):
+        if alpha == 1.0 and step_size <= tol and -float(c.min()) <= feasibility_tol:
+            # the full step just taken was below tol: near a solution the steps shrink
+            # superlinearly, so this point is closer still
             return SolveResult(y, "optimal", iteration, c, B)
     return SolveResult(y, "iteration_limit", max_iter, c)

@@ -87,8 +87,11 @@ class PairValueModel:
             backend=compiled.backend,
         )
 
-    def evaluate(self, tau: float, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(V (k,), ∇ₓV (k, n))`` at time-to-go ``tau`` [s] for states ``x`` (k, n) [rad]."""
+    def evaluate(
+        self, tau: float, x: np.ndarray, own_step: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(V (k,), ∇ₓV (k, n))`` at time-to-go ``tau`` [s] for states ``x`` (k, n) [rad],
+        each with ``own_step`` (n1,) [rad] added to robot 1's joints if given."""
         if not 0.0 <= tau <= self.horizon + 1e-9:
             raise InvalidValueError("tau", f"must lie in [0, {self.horizon}] s", tau)
         k = x.shape[0]
@@ -96,7 +99,7 @@ class PairValueModel:
         if call is None:
             fn = self.value_grad if k == 1 else self.value_grad.map(k)
             call = self._calls[k] = _BufferedCall(fn, k, self.state_dim)
-        return call(tau, x)
+        return call(tau, x, own_step)
 
 
 class _BufferedCall:
@@ -119,9 +122,13 @@ class _BufferedCall:
         buffer.set_res(0, memoryview(self.v))  # type: ignore[arg-type]
         buffer.set_res(1, memoryview(self.g))  # type: ignore[arg-type]
 
-    def __call__(self, tau: float, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def __call__(
+        self, tau: float, x: np.ndarray, own_step: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         self.tau[:] = tau
         self.x[:] = x
+        if own_step is not None:
+            self.x[:, : len(own_step)] += own_step
         self.trigger()
         if self.buffer.ret() != 0:
             raise NehmoError(f"evaluation of {self.fn.name()} failed (status {self.buffer.ret()})")
