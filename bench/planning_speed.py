@@ -129,6 +129,48 @@ def _stats(times: list[float]) -> dict[str, float]:
     }
 
 
+def _summarize(
+    report: dict[str, Any],
+    case: tuple[str, str, int],
+    kind: str,
+    used: PairValueModel,
+    plain: PairValueModel,
+    timed: tuple[list[float], list[str], list[int]],
+    chomp_times: list[float],
+    scenarios: int,
+) -> None:
+    cell_name, _, peers = case
+    times, statuses, iterations = timed
+    floor = _floor(used, peers)
+    stats = _stats(times)
+    counts = {k: statuses.count(k) for k in sorted(set(statuses))}
+    constrained = [t for t, s in zip(times, statuses, strict=True) if s != "naive"]
+    sqp_iters = [i for i, s in zip(iterations, statuses, strict=True) if s != "naive"]
+    report["cases"][f"{cell_name} {kind}"] = {
+        "cell": cell_name,
+        "planner": kind,
+        "peers": peers,
+        "scenarios": scenarios,
+        "steps": len(times),
+        "nehmo": stats,
+        "nehmo_constrained_steps": _stats(constrained) if constrained else None,
+        "constrained_share": len(constrained) / len(times),
+        "sqp_iterations_constrained": {
+            "median": float(np.median(sqp_iters)) if sqp_iters else None,
+            "p95": float(np.percentile(sqp_iters, 95)) if sqp_iters else None,
+        },
+        "statuses": counts,
+        "fail_safe_rate": float(np.mean([s not in ("naive", "optimal") for s in statuses])),
+        "p95_over_median": stats["p95_ms"] / stats["median_ms"],
+        "floor_batched_v_grad_ms": floor * 1e3,
+        "floor_casadi_layout_ms": _floor(plain, peers) * 1e3,
+        "median_over_floor": stats["median_ms"] / (floor * 1e3),
+        "chomp_plan_median_s": float(np.median(chomp_times)),
+        "chomp_over_nehmo_step": float(np.median(chomp_times)) / (stats["median_ms"] / 1e3),
+    }
+    print(cell_name, kind, json.dumps(report["cases"][f"{cell_name} {kind}"]))
+
+
 def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
     torch.set_num_threads(1)
     if model_kind == "shipped":
@@ -157,61 +199,41 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
         "cases": {},
     }
     chomp: dict[str, list[float]] = {}
-    runs = [
+    variants: list[tuple[tuple[str, str, int], str, PlannerSettings, PairValueModel]] = [
         (case, kind, settings, model)
         for case, (kind, settings) in itertools.product(CASES, VARIANTS.items())
     ]
-    runs.insert(1, (CASES[0], "nehmo, CasADi layout", VARIANTS["nehmo"], plain))
-    for (cell_name, arm, peers), kind, settings, used in runs:
+    variants.insert(1, (CASES[0], "nehmo, CasADi layout", VARIANTS["nehmo"], plain))
+    timed: dict[str, tuple[list[float], list[str], list[int]]] = {}
+    for case in CASES:
+        cell_name, arm, peers = case
         cell = load_cell(cell_name)
         chosen = _scenarios(cell_name, scenarios, 200)
-        planners = {a: NehmoPlanner(cell, a, [used], settings) for a in cell.arm_ids}
-        assert len(planners[arm].pairs) == peers
+        mine = [(kind, settings, used) for c, kind, settings, used in variants if c == case]
+        planners = {
+            kind: {a: NehmoPlanner(cell, a, [used], settings) for a in cell.arm_ids}
+            for kind, settings, used in mine
+        }
+        assert all(len(p[arm].pairs) == peers for p in planners.values())
         # as the planner nodes do after start-up: long-lived objects out of the collector's
         # reach, so a full collection does not land inside a timed step
         gc.collect()
         gc.freeze()
-        times: list[float] = []
-        statuses: list[str] = []
-        iterations: list[int] = []
+        for kind, _, _ in mine:
+            timed[kind] = ([], [], [])
+        # the variants take turns scenario by scenario, so a drift in the machine's speed
+        # during the run reaches all of them alike
         for scenario in chosen:
-            t, s, it = _episode(cell_name, planners, scenario, steps, arm)
-            times += t
-            statuses += s
-            iterations += it
-        if cell_name not in chomp:
-            chomp[cell_name] = [
-                plan_chomp(cell, scenario.start, scenario.goal).plan_time for scenario in chosen
-            ]
-        chomp_times = chomp[cell_name]
-        floor = _floor(used, peers)
-        stats = _stats(times)
-        counts = {k: statuses.count(k) for k in sorted(set(statuses))}
-        constrained = [t for t, s in zip(times, statuses, strict=True) if s != "naive"]
-        sqp_iters = [i for i, s in zip(iterations, statuses, strict=True) if s != "naive"]
-        report["cases"][f"{cell_name} {kind}"] = {
-            "cell": cell_name,
-            "planner": kind,
-            "peers": peers,
-            "scenarios": len(chosen),
-            "steps": len(times),
-            "nehmo": stats,
-            "nehmo_constrained_steps": _stats(constrained) if constrained else None,
-            "constrained_share": len(constrained) / len(times),
-            "sqp_iterations_constrained": {
-                "median": float(np.median(sqp_iters)) if sqp_iters else None,
-                "p95": float(np.percentile(sqp_iters, 95)) if sqp_iters else None,
-            },
-            "statuses": counts,
-            "fail_safe_rate": float(np.mean([s not in ("naive", "optimal") for s in statuses])),
-            "p95_over_median": stats["p95_ms"] / stats["median_ms"],
-            "floor_batched_v_grad_ms": floor * 1e3,
-            "floor_casadi_layout_ms": _floor(plain, peers) * 1e3,
-            "median_over_floor": stats["median_ms"] / (floor * 1e3),
-            "chomp_plan_median_s": float(np.median(chomp_times)),
-            "chomp_over_nehmo_step": float(np.median(chomp_times)) / (stats["median_ms"] / 1e3),
-        }
-        print(cell_name, kind, json.dumps(report["cases"][f"{cell_name} {kind}"]))
+            for kind, _, _ in mine:
+                t, s, it = _episode(cell_name, planners[kind], scenario, steps, arm)
+                timed[kind][0].extend(t)
+                timed[kind][1].extend(s)
+                timed[kind][2].extend(it)
+        chomp[cell_name] = [
+            plan_chomp(cell, scenario.start, scenario.goal).plan_time for scenario in chosen
+        ]
+        for kind, _, used in mine:
+            _summarize(report, case, kind, used, plain, timed[kind], chomp[cell_name], len(chosen))
     # IPOPT, the authors' solver, on the dual cell for reference
     cell = load_cell("dual_ur5")
     ipopt = {
