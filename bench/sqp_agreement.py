@@ -1,0 +1,175 @@
+"""Does the default SQP return the solutions of a tight one? Replayed on closed-loop steps.
+
+    OMP_NUM_THREADS=1 ./run python bench/sqp_agreement.py   # writes bench/results/sqp_agreement.*
+
+For the dual, three- and five-UR5 cells (1, 2 and 4 peers of the measured arm) every arm runs
+``nehmo`` with the default solver on the planning-speed bench's scenarios. At every step of the
+measured arm the same problem, from the same warm start and Hessian, is solved again with a
+tight setting: the SQP stopping at a 1e-9 rad step with every V row in every iteration (no
+screening). The closed loop follows the default answer. Reported per cell: how the statuses
+pair up, the largest joint difference of the two steps [rad] where both are optimal, the
+relative cost difference, the smallest constraint value of the default answer, and the time of
+both solves (median and p95 over the constrained steps).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np
+import torch
+from planning_speed import CASES, _scenarios
+
+from nehmo_core.hjr import load_value_function
+from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver
+from nehmo_core.planning.opt import OptProblem
+from nehmo_core.planning.sqp import SolveResult, solve_sqp
+from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.robots import load_cell
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+class _Both:
+    """The default solver, with the tight one run beside it on the measured arm's problems."""
+
+    def __init__(self) -> None:
+        self.default = SqpSolver()
+        self.record = False
+        self.rows: list[dict[str, Any]] = []
+
+    def __call__(
+        self,
+        problem: OptProblem,
+        y_start: np.ndarray,
+        deadline: float,
+        hessian: np.ndarray | None = None,
+    ) -> SolveResult:
+        start = time.perf_counter()
+        fast = self.default(problem, y_start, np.inf, hessian)
+        middle = time.perf_counter()
+        if self.record:
+            tight = solve_sqp(problem, y_start, 1e-9, 100, np.inf, hessian, screen=None)
+            end = time.perf_counter()
+            both = fast.status == tight.status == "optimal"
+            self.rows.append(
+                {
+                    "fast": fast.status,
+                    "tight": tight.status,
+                    "dy": float(np.abs(fast.y - tight.y).max()) if both else None,
+                    "dcost": (
+                        abs(problem.cost(fast.y) - problem.cost(tight.y))
+                        / max(problem.cost(tight.y), 1e-12)
+                        if both
+                        else None
+                    ),
+                    "min_c": float(fast.constraint.min()) if fast.success else None,
+                    "t_fast": middle - start,
+                    "t_tight": end - middle,
+                }
+            )
+        return fast
+
+
+def _cell(
+    cell_name: str, arm: str, model: PairValueModel, scenarios: int, steps: int
+) -> dict[str, Any]:
+    cell = load_cell(cell_name)
+    solvers = {a: _Both() for a in cell.arm_ids}
+    planners = {a: NehmoPlanner(cell, a, [model], solver=solvers[a]) for a in cell.arm_ids}
+    for scenario in _scenarios(cell_name, scenarios, 200):
+        q = {a: np.array(v) for a, v in scenario.start.items()}
+        for p in planners.values():
+            p.reset()
+        for _ in range(steps):
+            commands = {}
+            for a, planner in planners.items():
+                solvers[a].record = a == arm
+                commands[a] = planner.plan(q[a], q, scenario.goal[a]).velocity
+            q = {a: q[a] + 0.1 * commands[a] for a in q}
+    rows = solvers[arm].rows
+    solved = [r for r in rows if r["dy"] is not None]
+    constrained = [r for r in rows if r["fast"] != "naive"]
+    dy = np.array([r["dy"] for r in solved])
+    dcost = np.array([r["dcost"] for r in solved])
+    t_fast = np.array([r["t_fast"] for r in constrained]) * 1e3
+    t_tight = np.array([r["t_tight"] for r in constrained]) * 1e3
+    return {
+        "cell": cell_name,
+        "peers": len(planners[arm].pairs),
+        "steps": len(rows),
+        "status_pairs": {
+            f"{a} / {b}": n
+            for (a, b), n in Counter((r["fast"], r["tight"]) for r in rows).most_common()
+        },
+        "both_optimal": len(solved),
+        "dy_rad": {
+            "median": float(np.median(dy)),
+            "p95": float(np.percentile(dy, 95)),
+            "max": float(dy.max()),
+        },
+        "relative_cost_difference_max": float(dcost.max()),
+        "min_constraint_default": min(r["min_c"] for r in rows if r["min_c"] is not None),
+        "constrained_solve_ms": {
+            "default_median": float(np.median(t_fast)),
+            "default_p95": float(np.percentile(t_fast, 95)),
+            "tight_median": float(np.median(t_tight)),
+            "tight_p95": float(np.percentile(t_tight, 95)),
+        },
+    }
+
+
+def markdown(report: dict[str, Any]) -> str:
+    lines = [
+        "# Default SQP against a tight one, on the same problems",
+        "",
+        "Default: `sqp_tol` 1e-5 rad, `sqp_screen` 0.1 m. Tight: 1e-9 rad, every V row in every "
+        "iteration. Same problem, warm start and Hessian; the closed loop follows the default.",
+        "",
+        "| cell (peers) | steps | statuses default / tight | both optimal | max joint difference "
+        "median / p95 / max [rad] | max relative cost difference | min V − ε of default [m] "
+        "| constrained solve ms, default median / p95 | tight median / p95 |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for c in report["cells"]:
+        d, t = c["dy_rad"], c["constrained_solve_ms"]
+        pairs = ", ".join(f"{k}: {n}" for k, n in c["status_pairs"].items())
+        lines.append(
+            f"| {c['cell']} ({c['peers']}) | {c['steps']} | {pairs} | {c['both_optimal']} | "
+            f"{d['median']:.1e} / {d['p95']:.1e} / {d['max']:.1e} | "
+            f"{c['relative_cost_difference_max']:.1e} | {c['min_constraint_default']:.1e} | "
+            f"{t['default_median']:.2f} / {t['default_p95']:.2f} | "
+            f"{t['tight_median']:.2f} / {t['tight_p95']:.2f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenarios", type=int, default=4)
+    parser.add_argument("--steps", type=int, default=150)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    vf = load_value_function("ur5_ur5", variant="bc+sym")
+    model = PairValueModel.from_value_function(vf, "bench_ur5_ur5_bcsym")
+    report = {
+        "cells": [
+            _cell(cell_name, arm, model, args.scenarios, args.steps) for cell_name, arm, _ in CASES
+        ]
+    }
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / "sqp_agreement.json").write_text(json.dumps(report, indent=2) + "\n")
+    (RESULTS / "sqp_agreement.md").write_text(markdown(report))
+    print(markdown(report))
+
+
+if __name__ == "__main__":
+    main()
