@@ -62,14 +62,6 @@ class Constraints:
                 groups.append((index, states[mine]))
         return replace(self, groups=groups)
 
-    def states(self, y: np.ndarray) -> list[np.ndarray]:
-        out = []
-        for _, states in self.groups:
-            shifted = states.copy()
-            shifted[:, : len(y)] += y
-            out.append(shifted)
-        return out
-
     def evaluate(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(c (m,), J (m, n1))``: ``c = V − ε`` and its gradient with respect to ``y``."""
         n = len(y)
