@@ -81,6 +81,19 @@ def test_planner_predicts_peers_with_the_brute_force_worst_case(model: PairValue
     np.testing.assert_allclose(predicted[6:], q2 + 0.1 * worst, atol=1e-12)
 
 
+def test_evaluating_with_an_own_step_equals_evaluating_the_shifted_states(model) -> None:
+    x = np.random.default_rng(3).uniform(-2.0, 2.0, size=(3, 12))
+    step = np.linspace(-0.05, 0.05, 6)
+    shifted, before = x.copy(), x.copy()
+    shifted[:, :6] += step
+    for rows in (x[:1], x):  # the single-state and the mapped call
+        v, g = model.evaluate(0.3, rows, own_step=step)
+        v_ref, g_ref = model.evaluate(0.3, shifted[: len(rows)])
+        np.testing.assert_array_equal(v, v_ref)
+        np.testing.assert_array_equal(g, g_ref)
+    np.testing.assert_array_equal(x, before)  # the input is left alone
+
+
 def test_qp_step_meets_kkt_conditions() -> None:
     rng = np.random.default_rng(2)
     solved = 0
