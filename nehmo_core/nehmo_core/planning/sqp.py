@@ -32,7 +32,7 @@ class SolveResult:
     y: np.ndarray
     status: str  # "naive", "optimal", "infeasible", "iteration_limit", "timeout", "failed"
     iterations: int
-    constraint: np.ndarray  # V − ε at y, (m,)
+    constraint: np.ndarray  # V − ε at y, (m,); NaN for rows a screened solve left unevaluated
     hessian: np.ndarray | None = None  # the final Lagrangian Hessian approximation (n, n)
 
     @property
