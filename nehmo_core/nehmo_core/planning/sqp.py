@@ -205,7 +205,7 @@ def _iterate(
         s = y_new - y
         B = _bfgs(B, s, 2.0 * s - lam @ (J_new - J))
         y, c, J = y_new, c_new, J_new
-        if alpha == 1.0 and step_size <= tol and -float(c.min()) <= feasibility_tol:
+        if alpha == 1.0 and step_size <= tol and _shortfall(c) <= feasibility_tol:
             # the full step just taken was below tol: near a solution the steps shrink
             # superlinearly, so this point is closer still
             return SolveResult(y, "optimal", iteration, c, B)
