@@ -62,11 +62,12 @@ class OptSolver(Protocol):
 
 @dataclass(frozen=True)
 class SqpSolver:
-    """:func:`solve_sqp` with fixed tolerance, iteration limit and screening margin."""
+    """:func:`solve_sqp` with fixed tolerance, iteration limit, screening margin and loop."""
 
     tol: float = 1e-5
     max_iter: int = 30
     screen: float | None = 0.1
+    native: bool = True
 
     def __call__(
         self,
@@ -76,7 +77,14 @@ class SqpSolver:
         hessian: np.ndarray | None = None,
     ) -> SolveResult:
         return solve_sqp(
-            problem, y_start, self.tol, self.max_iter, deadline, hessian, screen=self.screen
+            problem,
+            y_start,
+            self.tol,
+            self.max_iter,
+            deadline,
+            hessian,
+            screen=self.screen,
+            native=self.native,
         )
 
 
@@ -84,7 +92,9 @@ def make_solver(settings: PlannerSettings) -> OptSolver:
     """The solver named by ``settings.solver``."""
     if settings.solver == "ipopt":
         return IpoptSolver(settings.ipopt_tol, settings.ipopt_max_iter, settings.deadline).solve
-    return SqpSolver(settings.sqp_tol, settings.sqp_max_iter, settings.sqp_screen)
+    return SqpSolver(
+        settings.sqp_tol, settings.sqp_max_iter, settings.sqp_screen, settings.sqp_native
+    )
 
 
 @dataclass(frozen=True)

@@ -74,6 +74,9 @@ class PlannerSettings:
     # step; the rest are checked at the solution and join if broken (inf: every row throughout)
     sqp_screen: float = 0.1
     sqp_warm_hessian: bool = True  # start BFGS from the previous tick's Hessian estimate
+    # run the SQP iterations in C when every pair model has generated code (same algorithm and
+    # answers as the Python loop, less overhead per iteration); False: the Python loop
+    sqp_native: bool = True
     # IPOPT (authors' settings)
     ipopt_tol: float = 1e-3
     ipopt_max_iter: int = 30

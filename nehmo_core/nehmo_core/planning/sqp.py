@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 import daqp
 import numpy as np
 
+from nehmo_core.planning.native import loop
 from nehmo_core.planning.opt import OptProblem
 
 __all__ = ["QPStep", "SolveResult", "qp_step", "solve_sqp"]
@@ -105,6 +106,7 @@ def solve_sqp(
     hessian: np.ndarray | None = None,
     feasibility_tol: float = 1e-7,
     screen: float | None = 0.1,
+    native: bool = True,
 ) -> SolveResult:
     """Solve ``problem`` from ``y_start``; ``deadline`` is a ``time.perf_counter()`` instant.
 
@@ -118,6 +120,10 @@ def solve_sqp(
     solution of that smaller problem every V row is evaluated; rows it breaks join (with any
     now below ``screen``) and the iterations go on from there. The answer is therefore a KKT
     point of the whole problem, as without screening. ``None`` carries every row throughout.
+
+    ``native``: run the iterations in C (:mod:`.native`) when every pair model has generated
+    code and a compiler works; the same algorithm as the Python loop, so the same answers up to
+    rounding. ``False`` forces the Python loop.
     """
     cons = problem.constraints
     y = problem.naive_step()
@@ -133,10 +139,12 @@ def solve_sqp(
     used = 0
     while True:
         if keep.all():
-            result = _iterate(problem, y, B, tol, max_iter - used, deadline, feasibility_tol)
+            result = _iterate(
+                problem, y, B, tol, max_iter - used, deadline, feasibility_tol, native
+            )
             return replace(result, iterations=used + result.iterations)
         reduced = replace(problem, constraints=cons.subset(keep))
-        result = _iterate(reduced, y, B, tol, max_iter - used, deadline, feasibility_tol)
+        result = _iterate(reduced, y, B, tol, max_iter - used, deadline, feasibility_tol, native)
         used += result.iterations
         if not result.success:
             full = np.full(cons.count, np.nan)  # rows screened out were not evaluated at y
@@ -164,9 +172,34 @@ def _iterate(
     max_iter: int,
     deadline: float,
     feasibility_tol: float,
+    native: bool = False,
 ) -> SolveResult:
-    """SQP iterations on ``problem`` from ``y`` with Hessian approximation ``B``."""
+    """SQP iterations on ``problem`` from ``y`` with Hessian approximation ``B`` (in C when
+    ``native`` and the C loop can evaluate every model, else in Python)."""
     cons, ymax, n = problem.constraints, problem.y_max, len(y)
+    if native and (c_loop := loop()) is not None:
+        linear = (cons.linear.A, cons.linear.b) if cons.linear is not None else None
+        out = c_loop.iterate(
+            list(cons.models),
+            list(cons.groups),
+            linear,
+            problem.error0,
+            ymax,
+            cons.t_safe,
+            cons.epsilon,
+            y,
+            B,
+            tol,
+            max_iter,
+            deadline,
+            feasibility_tol,
+        )
+        if out is not None:
+            status, iterations, y, B, c, flag = out
+            if status == "failed":
+                status = f"failed (QP exit flag {flag})"
+            hessian = B if status == "optimal" else None
+            return SolveResult(y, status, iterations, c, hessian)
     error0 = problem.error0
     c, J = cons.evaluate(y)
     rho = 1.0

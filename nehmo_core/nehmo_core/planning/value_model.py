@@ -10,6 +10,7 @@ at ``base2``; robot 1 is the controlled arm, robot 2 the disturbance) and two Ca
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
@@ -42,6 +43,7 @@ class PairValueModel:
     value: ca.Function
     value_grad: ca.Function
     backend: str = "vm"
+    library: Path | None = None  # the generated library of ``value_grad`` (compiled backend)
     _calls: dict[int, _BufferedCall] = field(default_factory=dict, repr=False)
 
     @property
@@ -85,6 +87,7 @@ class PairValueModel:
             value=value,
             value_grad=compiled.function,
             backend=compiled.backend,
+            library=compiled.library,
         )
 
     def evaluate(
