@@ -20,7 +20,9 @@ activity does). Steps where the naive step is already safe cost one evaluation; 
 cost a few SQP iterations, so the distribution is bimodal and the constrained steps are reported
 on their own as well. Two planners side by side on the same scenarios: ``nehmo`` (the default
 settings: Opt plus the self-clearance rows, whose exact self-distances and Jacobians every step
-pays for, and the stall escape) and ``nehmo_paper`` (the paper's Opt). Like the planner nodes,
+pays for, and the stall escape) and ``nehmo_paper`` (the paper's Opt). Two more rows isolate
+the solver: ``nehmo, Python SQP loop`` (the same SQP iterating in Python instead of C, same
+answers) and ``nehmo, tight SQP`` (``sqp_tol`` 1e-7 rad, no screening). Like the planner nodes,
 the bench freezes its long-lived objects out of the garbage collector before timing.
 """
 
@@ -59,6 +61,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 CASES = (("dual_ur5", "ur5_0", 1), ("triple_ur5", "ur5_0", 2), ("five_ur5", "ur5_0", 4))
 VARIANTS = {
     "nehmo": PlannerSettings(),
+    "nehmo, Python SQP loop": PlannerSettings(sqp_native=False),
     "nehmo, tight SQP": PlannerSettings(sqp_tol=1e-7, sqp_screen=math.inf),
     "nehmo_paper": PlannerSettings.preset("paper"),
 }
@@ -183,9 +186,8 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
         description = "bc+sym SIREN 3x128, random weights (residual x0.05)"
     model = PairValueModel.from_value_function(vf, "bench_ur5_ur5_bcsym")
     _, graph = value_functions(vf, "bench_ur5_ur5_bcsym")
-    plain = replace(
-        model, value_grad=compile_function(graph, "compiled", compact=False).function, _calls={}
-    )
+    plain_code = compile_function(graph, "compiled", compact=False)
+    plain = replace(model, value_grad=plain_code.function, library=plain_code.library, _calls={})
     report: dict[str, Any] = {
         "machine": platform.processor() or platform.machine(),
         "cpu_count": os.cpu_count(),

@@ -11,9 +11,10 @@ import pytest
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.hjr.networks import NetworkSettings
+from nehmo_core.planning import native
 from nehmo_core.planning.baselines import NaivePlanner
 from nehmo_core.planning.ipopt_solver import IpoptSolver
-from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver
+from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver, make_solver
 from nehmo_core.planning.opt import OptProblem, worst_case_disturbance
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.sqp import SolveResult, qp_step, solve_sqp
@@ -253,6 +254,61 @@ def test_screened_sqp_returns_the_solution_of_the_whole_problem(
     assert compared >= 20
     if screen < 0.01:
         assert rejoined >= 1  # the check after the reduced solve had rows to bring back
+
+
+def _assert_same_solve(a: SolveResult, b: SolveResult) -> None:
+    assert a.status == b.status
+    assert a.iterations == b.iterations
+    np.testing.assert_allclose(a.y, b.y, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.constraint, b.constraint, rtol=0, atol=1e-9)
+    assert (a.hessian is None) == (b.hessian is None)
+    if a.hessian is not None:  # BFGS divides by sᵀBs, so its rounding grows with small steps
+        np.testing.assert_allclose(a.hessian, b.hessian, rtol=1e-4, atol=1e-6)
+
+
+def test_c_loop_returns_the_python_loops_answers(model) -> None:
+    """The C iterations are the Python ones step for step: same statuses, iteration counts,
+    steps, constraint values and Hessian estimates (up to rounding), with and without the
+    self-clearance rows, with one peer and with four (screened)."""
+    assert native.loop() is not None, "the C loop must build and pass its DAQP check here"
+    planner = NehmoPlanner(CELL, OWN, [model])
+    problems = []
+    for q1, q2, goal in _near_contact(model, 5, 15):
+        now = planner._current(q1, {PEER: q2})
+        problems.append(planner._problem(q1 - goal, now))
+        problems.append(planner._problem(q1 - goal, now, planner._self_rows(q1)))
+    problems += _multi_peer_problems(model, 11, 15, two_contacts=True)
+    statuses = set()
+    for problem in problems:
+        for hessian in (None, 3.0 * np.eye(6)):
+            py = solve_sqp(problem, np.zeros(6), hessian=hessian, native=False)
+            c = solve_sqp(problem, np.zeros(6), hessian=hessian)
+            _assert_same_solve(c, py)
+            statuses.add(c.status)
+    assert "optimal" in statuses
+
+
+def test_c_loop_steps_aside_for_models_without_generated_code(model) -> None:
+    """A model evaluated on CasADi's VM has no C function to call: the Python loop runs."""
+    on_vm = replace(model, library=None)
+    assert native.loop() is not None
+    assert native.loop().model(on_vm) is None
+    planner = NehmoPlanner(CELL, OWN, [on_vm])
+    q1, q2, goal = _near_contact(model, 6, 1)[0]
+    problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
+    _assert_same_solve(
+        solve_sqp(problem, np.zeros(6)), solve_sqp(problem, np.zeros(6), native=False)
+    )
+
+
+def test_c_loop_reports_a_passed_deadline(model) -> None:
+    planner = NehmoPlanner(CELL, OWN, [model])
+    q1, q2, goal = _near_contact(model, 7, 1)[0]
+    problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
+    late = solve_sqp(problem, np.zeros(6), deadline=time.perf_counter() - 1.0)
+    assert late.status == "timeout"
+    assert late.iterations == 1
+    assert make_solver(PlannerSettings(sqp_native=False)) == SqpSolver(native=False)
 
 
 def test_sqp_screen_setting_is_validated() -> None:
