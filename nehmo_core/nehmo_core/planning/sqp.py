@@ -117,7 +117,7 @@ def solve_sqp(
 
     ``screen`` [m]: with several V rows, the iterations carry only those below ``screen`` at the
     naive step (their values there are at hand), so each iteration evaluates fewer pairs. At a
-    solution of that smaller problem every V row is evaluated; rows it breaks join (with any
+    solution of that smaller problem the other V rows are evaluated; rows it breaks join (with any
     now below ``screen``) and the iterations go on from there. The answer is therefore a KKT
     point of the whole problem, as without screening. ``None`` carries every row throughout.
 
@@ -146,14 +146,16 @@ def solve_sqp(
         reduced = replace(problem, constraints=cons.subset(keep))
         result = _iterate(reduced, y, B, tol, max_iter - used, deadline, feasibility_tol, native)
         used += result.iterations
+        carried = np.concatenate([np.flatnonzero(keep), np.arange(rows, cons.count)])
         if not result.success:
             full = np.full(cons.count, np.nan)  # rows screened out were not evaluated at y
-            full[np.concatenate([np.flatnonzero(keep), np.arange(rows, cons.count)])] = (
-                result.constraint
-            )
+            full[carried] = result.constraint
             return replace(result, iterations=used, constraint=full)
         y = result.y
-        c, _ = cons.evaluate(y)
+        # the carried rows are at hand at y: evaluate the others only
+        c = np.empty(cons.count)
+        c[carried] = result.constraint
+        c[np.flatnonzero(~keep)] = cons.subset(~keep).evaluate(y)[0][: rows - int(keep.sum())]
         broken = ~keep & (c[:rows] < -feasibility_tol)
         if not broken.any():
             return SolveResult(y, "optimal", used, c, result.hessian)
