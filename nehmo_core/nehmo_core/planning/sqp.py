@@ -161,7 +161,7 @@ def solve_sqp(
             return SolveResult(y, "optimal", used, c, result.hessian)
         if used >= max_iter:
             return SolveResult(y, "iteration_limit", used, c)
-        keep |= c[:rows] < screen
+        keep |= c[:rows] < (np.inf if screen is None else screen)  # None: all kept already
         if result.hessian is not None:
             B = result.hessian
 
