@@ -299,7 +299,7 @@ def markdown(report: dict[str, Any]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenarios", type=int, default=4)
+    parser.add_argument("--scenarios", type=int, default=8)
     parser.add_argument("--steps", type=int, default=150)
     parser.add_argument("--model", choices=("shipped", "random"), default="shipped")
     args = parser.parse_args()

@@ -1,11 +1,12 @@
 """The SQP iterations in C (``sqp_loop.c``): the same algorithm as the Python loop, less overhead.
 
-Why: a constrained step costs one V/∇V evaluation per SQP iteration (~0.1 ms each, generated C)
-plus, in Python, ~0.1 ms of small-array bookkeeping and a DAQP call through its Python wrapper
-per iteration. That overhead made constrained steps ~2.5× the cost of a step whose naive step is
-safe. The C loop calls the pair models' generated V/∇V functions and DAQP's C entry point
-(``daqp_quadprog``, exported by the installed ``daqp`` module) directly, so an iteration costs
-little more than its evaluation.
+Why: each SQP iteration costs one V/∇V evaluation (generated C, ~0.1–0.15 ms for one pair) and,
+in Python, about as much again in small-array bookkeeping (QP set-up and DAQP's Python wrapper,
+BFGS, line search). The C loop calls the pair models' generated V/∇V functions and DAQP's C entry
+point (``daqp_quadprog``, exported by the installed ``daqp`` module) directly, so an iteration
+costs little more than its evaluation: on 79 constrained dual-UR5 problems from closed loops,
+a solve took 0.76 ms at the median and 1.03 ms at p95 against 1.03 and 1.53 ms in Python, with
+the same statuses and iteration counts and steps within 1e-12 rad.
 
 The C file is compiled with the system compiler once and cached beside the generated model
 code (:mod:`.codegen`). Loading checks DAQP's C interface against ``daqp.solve`` on a few QPs

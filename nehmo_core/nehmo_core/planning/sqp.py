@@ -10,6 +10,9 @@
    constraint violation is below ``feasibility_tol`` (a KKT point, as IPOPT's); report
    ``infeasible`` when a linearization has no feasible point and ``timeout`` when the deadline
    passes.
+
+The iterations run in C (:mod:`.native`) when every pair model has generated code; the Python
+loop below is the same algorithm and the fallback.
 """
 
 from __future__ import annotations
