@@ -270,7 +270,9 @@ def test_c_loop_returns_the_python_loops_answers(model) -> None:
     """The C iterations are the Python ones step for step: same statuses, iteration counts,
     steps, constraint values and Hessian estimates (up to rounding), with and without the
     self-clearance rows, with one peer and with four (screened)."""
-    assert native.loop() is not None, "the C loop must build and pass its DAQP check here"
+    loop = native.loop()
+    assert loop is not None, "the C loop must build and pass its DAQP check here"
+    assert loop.model(model) is not None  # so the solves below do run in C
     planner = NehmoPlanner(CELL, OWN, [model])
     problems = []
     for q1, q2, goal in _near_contact(model, 5, 15):
@@ -286,6 +288,31 @@ def test_c_loop_returns_the_python_loops_answers(model) -> None:
             _assert_same_solve(c, py)
             statuses.add(c.status)
     assert "optimal" in statuses
+
+
+def test_c_loop_evaluates_several_models_like_the_python_loop(model) -> None:
+    """Peers split between two pair models (two groups of rows, two generated functions)."""
+    other = PairValueModel.from_value_function(
+        random_value_function(
+            "ur5_ur5", "bc+sym", NetworkSettings(width=64, hidden_layers=2), seed=1
+        ),
+        "test_opt_bcsym_seed1",
+    )
+    loop = native.loop()
+    assert loop is not None and loop.model(model) is not None and loop.model(other) is not None
+    optimal = 0
+    for problem in _multi_peer_problems(model, 12, 10):
+        ((_, states),) = problem.constraints.groups
+        groups = [(0, states[:2]), (1, states[2:])]
+        split = replace(
+            problem,
+            constraints=replace(problem.constraints, models=[model, other], groups=groups),
+        )
+        for screen in (None, 0.1):
+            py = solve_sqp(split, np.zeros(6), screen=screen, native=False)
+            _assert_same_solve(solve_sqp(split, np.zeros(6), screen=screen), py)
+            optimal += py.status == "optimal"
+    assert optimal >= 4
 
 
 def test_c_loop_steps_aside_for_models_without_generated_code(model) -> None:
