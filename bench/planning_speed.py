@@ -269,7 +269,7 @@ def markdown(report: dict[str, Any]) -> str:
         lines.append(
             f"| {c['cell']} ({c['peers']}) | {c['planner']} | {c['steps']} | "
             f"{n['median_ms']:.2f} | {n['p95_ms']:.2f} | "
-            f"{n['max_ms']:.1f} | {c['p95_over_median']:.1f} | {c['constrained_share']:.0%} | "
+            f"{n['max_ms']:.1f} | {c['p95_over_median']:.2f} | {c['constrained_share']:.0%} | "
             f"{con} | {its} | {c['fail_safe_rate']:.1%} | "
             f"{c['floor_batched_v_grad_ms']:.3f} | {c['median_over_floor']:.1f} | "
             f"{c['chomp_plan_median_s']:.2f} | {c['chomp_over_nehmo_step']:.0f} |"
