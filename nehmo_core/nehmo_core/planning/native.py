@@ -31,6 +31,7 @@ import numpy as np
 
 from nehmo_core.errors import NehmoError
 from nehmo_core.planning.codegen import _compiler, _cpu
+from nehmo_core.planning.opt import OptProblem
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots.loader import cache_dir
 
@@ -76,7 +77,10 @@ class _ModelHandle:
 
 
 class NativeLoop:
-    """The loaded C loop, DAQP's C entry point and its default settings."""
+    """The loaded C loop, DAQP's C entry point and its default settings.
+
+    Not thread-safe: each pair model has one set of scratch arrays (as its buffered Python
+    evaluation has), so one planner's solves must not overlap."""
 
     def __init__(self, library: ctypes.CDLL) -> None:
         self.library = library
@@ -147,13 +151,7 @@ class NativeLoop:
 
     def iterate(
         self,
-        models: list[PairValueModel],
-        groups: list[tuple[int, np.ndarray]],
-        linear: tuple[np.ndarray, np.ndarray] | None,
-        error0: np.ndarray,
-        y_max: float,
-        t_safe: float,
-        epsilon: float,
+        problem: OptProblem,
         y: np.ndarray,
         B: np.ndarray,
         tol: float,
@@ -161,18 +159,21 @@ class NativeLoop:
         deadline: float,
         feasibility_tol: float,
     ) -> tuple[str, int, np.ndarray, np.ndarray, np.ndarray, int] | None:
-        """Run the C loop; ``(status, iterations, y, B, c, QP flag)``, or ``None`` when a model
-        has no C handle or the problem exceeds the C loop's sizes."""
+        """Run the C loop on ``problem`` from ``y`` with Hessian approximation ``B``;
+        ``(status, iterations, y, B, c, QP flag)``, or ``None`` when a model has no C handle or
+        the problem exceeds the C loop's sizes."""
+        cons = problem.constraints
+        models, groups, linear = cons.models, cons.groups, cons.linear
         n = len(y)
         structs = (_Group * max(len(groups), 1))()
-        keep = []
+        alive = []  # arrays the C side reads, kept referenced until it returns
         m = 0
         for slot, (index, states) in zip(structs, groups, strict=False):
             handle = self.model(models[index])
             if handle is None:
                 return None
             states = np.ascontiguousarray(states, dtype=np.float64)
-            keep.append(states)
+            alive.append(states)
             slot.fn, slot.iw, slot.w = handle.fn, handle.iw.ctypes.data, handle.w.ctypes.data
             slot.n, slot.k = states.shape[1], states.shape[0]
             slot.states = states.ctypes.data
@@ -182,8 +183,8 @@ class NativeLoop:
         nlin = 0
         A = b = None
         if linear is not None:
-            A = np.ascontiguousarray(linear[0], dtype=np.float64)
-            b = np.ascontiguousarray(linear[1], dtype=np.float64)
+            A = np.ascontiguousarray(linear.A, dtype=np.float64)
+            b = np.ascontiguousarray(linear.b, dtype=np.float64)
             nlin = len(b)
         m += nlin
         if n > MAX_N or m > MAX_M:
@@ -192,15 +193,15 @@ class NativeLoop:
         B = np.array(B, dtype=np.float64, order="C")
         c = np.empty(m)
         J = np.empty((m, n))
-        e0 = np.ascontiguousarray(error0, dtype=np.float64)
+        e0 = np.ascontiguousarray(problem.error0, dtype=np.float64)
         iterations, flag = ctypes.c_int(), ctypes.c_int()
         code = self.iterate_fn(
             n,
             m,
             e0.ctypes.data,
-            y_max,
-            t_safe,
-            epsilon,
+            problem.y_max,
+            cons.t_safe,
+            cons.epsilon,
             len(groups),
             ctypes.addressof(structs),
             nlin,

@@ -183,22 +183,7 @@ def _iterate(
     ``native`` and the C loop can evaluate every model, else in Python)."""
     cons, ymax, n = problem.constraints, problem.y_max, len(y)
     if native and (c_loop := loop()) is not None:
-        linear = (cons.linear.A, cons.linear.b) if cons.linear is not None else None
-        out = c_loop.iterate(
-            list(cons.models),
-            list(cons.groups),
-            linear,
-            problem.error0,
-            ymax,
-            cons.t_safe,
-            cons.epsilon,
-            y,
-            B,
-            tol,
-            max_iter,
-            deadline,
-            feasibility_tol,
-        )
+        out = c_loop.iterate(problem, y, B, tol, max_iter, deadline, feasibility_tol)
         if out is not None:
             status, iterations, y, B, c, flag = out
             if status == "failed":
