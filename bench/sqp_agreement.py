@@ -9,7 +9,10 @@ tight setting: the SQP stopping at a 1e-9 rad step with every V row in every ite
 screening). The closed loop follows the default answer. Reported per cell: how the statuses
 pair up, the largest joint difference of the two steps [rad] where both are optimal, the
 relative cost difference, the smallest constraint value of the default answer, and the time of
-both solves (median and p95 over the constrained steps).
+both solves (median and p95 over the constrained steps). The default solver iterates in C; each
+problem is also solved by its Python loop (``sqp_native=False``, the same algorithm), and the
+last columns say how often the two agree on status and iteration count and how far their steps
+are apart.
 """
 
 from __future__ import annotations
@@ -59,6 +62,7 @@ class _Both:
         if self.record:
             tight = solve_sqp(problem, y_start, 1e-9, 100, np.inf, hessian, screen=None)
             end = time.perf_counter()
+            python = solve_sqp(problem, y_start, hessian=hessian, native=False)
             both = fast.status == tight.status == "optimal"
             self.rows.append(
                 {
@@ -72,6 +76,9 @@ class _Both:
                         else None
                     ),
                     "min_c": float(fast.constraint.min()) if fast.success else None,
+                    "python_same": python.status == fast.status
+                    and python.iterations == fast.iterations,
+                    "python_dy": float(np.abs(fast.y - python.y).max()),
                     "t_fast": middle - start,
                     "t_tight": end - middle,
                 }
@@ -117,6 +124,8 @@ def _cell(
             "max": float(dy.max()),
         },
         "relative_cost_difference_max": float(dcost.max()),
+        "python_loop_same_status_and_iterations": sum(r["python_same"] for r in rows),
+        "python_loop_dy_max_rad": max(r["python_dy"] for r in rows),
         "min_constraint_default": min(r["min_c"] for r in rows if r["min_c"] is not None),
         "constrained_solve_ms": {
             "default_median": float(np.median(t_fast)),
@@ -136,8 +145,9 @@ def markdown(report: dict[str, Any]) -> str:
         "",
         "| cell (peers) | steps | statuses default / tight | both optimal | max joint difference "
         "median / p95 / max [rad] | max relative cost difference | min V − ε of default [m] "
-        "| constrained solve ms, default median / p95 | tight median / p95 |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| constrained solve ms, default median / p95 | tight median / p95 "
+        "| C loop = Python loop (status and iterations) | max C − Python step difference [rad] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in report["cells"]:
         d, t = c["dy_rad"], c["constrained_solve_ms"]
@@ -147,7 +157,9 @@ def markdown(report: dict[str, Any]) -> str:
             f"{d['median']:.1e} / {d['p95']:.1e} / {d['max']:.1e} | "
             f"{c['relative_cost_difference_max']:.1e} | {c['min_constraint_default']:.1e} | "
             f"{t['default_median']:.2f} / {t['default_p95']:.2f} | "
-            f"{t['tight_median']:.2f} / {t['tight_p95']:.2f} |"
+            f"{t['tight_median']:.2f} / {t['tight_p95']:.2f} | "
+            f"{c['python_loop_same_status_and_iterations']} of {c['steps']} | "
+            f"{c['python_loop_dy_max_rad']:.1e} |"
         )
     return "\n".join(lines) + "\n"
 
