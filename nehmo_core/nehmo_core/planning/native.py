@@ -92,7 +92,7 @@ class NativeLoop:
         self.iterate_fn = library.nehmo_sqp_iterate
         self.iterate_fn.restype = _I
         self.iterate_fn.argtypes = [_I, _I, _P, _D, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
-        self.iterate_fn.argtypes += [_D, _D, _I, _D, _P, _P, _I, _P, _P]
+        self.iterate_fn.argtypes += [_D, _D, _I, _D, _P, _P, _P, _P]
         self.qp_fn = library.nehmo_qp_check
         self.qp_fn.restype = _I
         self.qp_fn.argtypes = [_P, _P, _I, _I, _P, _P, _P, _P, _P, _P, _P, _P]
@@ -158,12 +158,10 @@ class NativeLoop:
         max_iter: int,
         deadline: float,
         feasibility_tol: float,
-        linearization: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> tuple[str, int, np.ndarray, np.ndarray, np.ndarray, int] | None:
         """Run the C loop on ``problem`` from ``y`` with Hessian approximation ``B``;
         ``(status, iterations, y, B, c, QP flag)``, or ``None`` when a model has no C handle or
-        the problem exceeds the C loop's sizes. ``linearization``: ``(c, J)`` at ``y`` if
-        already at hand (the loop then starts without evaluating)."""
+        the problem exceeds the C loop's sizes."""
         cons = problem.constraints
         models, groups, linear = cons.models, cons.groups, cons.linear
         n = len(y)
@@ -193,15 +191,8 @@ class NativeLoop:
             return None
         y = np.array(y, dtype=np.float64)
         B = np.array(B, dtype=np.float64, order="C")
-        if linearization is None:
-            c, J = np.empty(m), np.empty((m, n))
-        else:
-            c = np.array(linearization[0], dtype=np.float64)
-            J = np.array(linearization[1], dtype=np.float64, order="C")
-            if c.shape != (m,) or J.shape != (m, n):
-                raise ValueError(
-                    f"linearization shapes {c.shape}, {J.shape}; need ({m},), ({m}, {n})"
-                )
+        c = np.empty(m)
+        J = np.empty((m, n))
         e0 = np.ascontiguousarray(problem.error0, dtype=np.float64)
         iterations, flag = ctypes.c_int(), ctypes.c_int()
         code = self.iterate_fn(
@@ -226,7 +217,6 @@ class NativeLoop:
             deadline,
             self.quadprog,
             ctypes.addressof(self.settings),
-            int(linearization is not None),
             ctypes.byref(iterations),
             ctypes.byref(flag),
         )

@@ -68,7 +68,6 @@ class SqpSolver:
     max_iter: int = 30
     screen: float | None = 0.1
     native: bool = True
-    start: str = "warm"
 
     def __call__(
         self,
@@ -86,7 +85,6 @@ class SqpSolver:
             hessian,
             screen=self.screen,
             native=self.native,
-            start=self.start,
         )
 
 
@@ -95,11 +93,7 @@ def make_solver(settings: PlannerSettings) -> OptSolver:
     if settings.solver == "ipopt":
         return IpoptSolver(settings.ipopt_tol, settings.ipopt_max_iter, settings.deadline).solve
     return SqpSolver(
-        settings.sqp_tol,
-        settings.sqp_max_iter,
-        settings.sqp_screen,
-        settings.sqp_native,
-        settings.sqp_start,
+        settings.sqp_tol, settings.sqp_max_iter, settings.sqp_screen, settings.sqp_native
     )
 
 

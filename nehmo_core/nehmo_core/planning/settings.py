@@ -7,10 +7,9 @@ from typing import Any
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 
-__all__ = ["PAPER_OPT", "SOLVERS", "SQP_STARTS", "PlannerSettings"]
+__all__ = ["PAPER_OPT", "SOLVERS", "PlannerSettings"]
 
 SOLVERS = ("sqp", "ipopt")
-SQP_STARTS = ("warm", "naive")
 """``sqp``: the exact active-set SQP of :mod:`nehmo_core.planning.sqp` (fast);
 ``ipopt``: IPOPT through CasADi, the authors' setting (the reference)."""
 
@@ -78,9 +77,6 @@ class PlannerSettings:
     # run the SQP iterations in C when every pair model has generated code (same algorithm and
     # answers as the Python loop, less overhead per iteration); False: the Python loop
     sqp_native: bool = True
-    # where the SQP starts: "warm" (the previous tick's step) or "naive" (the naive step, whose
-    # linearization the naive check has already evaluated; the warm start if it admits no step)
-    sqp_start: str = "warm"
     # IPOPT (authors' settings)
     ipopt_tol: float = 1e-3
     ipopt_max_iter: int = 30
@@ -123,8 +119,6 @@ class PlannerSettings:
                 raise InvalidValueError(name, "must be >= 1", getattr(self, name))
         if not self.ipopt_tol > 0:
             raise InvalidValueError("ipopt_tol", "must be > 0", self.ipopt_tol)
-        if self.sqp_start not in SQP_STARTS:
-            raise UnknownNameError("sqp_start", self.sqp_start, SQP_STARTS)
         if self.solver not in SOLVERS:
             raise UnknownNameError("solver", self.solver, SOLVERS)
         if self.backend not in ("auto", "compiled", "vm"):

@@ -110,7 +110,6 @@ def solve_sqp(
     feasibility_tol: float = 1e-7,
     screen: float | None = 0.1,
     native: bool = True,
-    start: str = "warm",
 ) -> SolveResult:
     """Solve ``problem`` from ``y_start``; ``deadline`` is a ``time.perf_counter()`` instant.
 
@@ -125,17 +124,13 @@ def solve_sqp(
     now below ``screen``) and the iterations go on from there. The answer is therefore a KKT
     point of the whole problem, as without screening. ``None`` carries every row throughout.
 
-    ``start``: ``"warm"`` iterates from ``y_start``; ``"naive"`` from the naive step, whose
-    linearization the naive check has already evaluated (one evaluation fewer), falling back to
-    ``y_start`` when no step from that linearization stays in the box.
-
     ``native``: run the iterations in C (:mod:`.native`) when every pair model has generated
     code and a compiler works; the same algorithm as the Python loop, so the same answers up to
     rounding. ``False`` forces the Python loop.
     """
     cons = problem.constraints
     y = problem.naive_step()
-    c, J = cons.evaluate(y)
+    c, _ = cons.evaluate(y)
     if _shortfall(c) == 0.0:
         return SolveResult(y, "naive", 0, c)
     n, ymax, rows = len(y), problem.y_max, cons.value_count
@@ -143,27 +138,17 @@ def solve_sqp(
     keep = np.ones(rows, dtype=bool)
     if screen is not None and rows > 1:
         keep = c[:rows] < screen
-    warm = np.minimum(np.maximum(y_start, -ymax), ymax)
-    linearization: tuple[np.ndarray, np.ndarray] | None = None
-    if start == "naive":
-        carried = np.concatenate([np.flatnonzero(keep), np.arange(rows, cons.count)])
-        linearization = (c[carried], J[carried])
-    else:
-        y = warm
+    y = np.minimum(np.maximum(y_start, -ymax), ymax)
     used = 0
     while True:
-        reduced = problem if keep.all() else replace(problem, constraints=cons.subset(keep))
-        result = _iterate(
-            reduced, y, B, tol, max_iter - used, deadline, feasibility_tol, native, linearization
-        )
-        used += result.iterations
-        if linearization is not None and result.status == "infeasible" and result.iterations == 1:
-            # no step from the naive step's linearization stays in the box: try the warm start's
-            linearization, y = None, warm
-            continue
-        linearization = None
         if keep.all():
-            return replace(result, iterations=used)
+            result = _iterate(
+                problem, y, B, tol, max_iter - used, deadline, feasibility_tol, native
+            )
+            return replace(result, iterations=used + result.iterations)
+        reduced = replace(problem, constraints=cons.subset(keep))
+        result = _iterate(reduced, y, B, tol, max_iter - used, deadline, feasibility_tol, native)
+        used += result.iterations
         carried = np.concatenate([np.flatnonzero(keep), np.arange(rows, cons.count)])
         if not result.success:
             full = np.full(cons.count, np.nan)  # rows screened out were not evaluated at y
@@ -193,13 +178,12 @@ def _iterate(
     deadline: float,
     feasibility_tol: float,
     native: bool = False,
-    linearization: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SolveResult:
     """SQP iterations on ``problem`` from ``y`` with Hessian approximation ``B`` (in C when
     ``native`` and the C loop can evaluate every model, else in Python)."""
     cons, ymax, n = problem.constraints, problem.y_max, len(y)
     if native and (c_loop := loop()) is not None:
-        out = c_loop.iterate(problem, y, B, tol, max_iter, deadline, feasibility_tol, linearization)
+        out = c_loop.iterate(problem, y, B, tol, max_iter, deadline, feasibility_tol)
         if out is not None:
             status, iterations, y, B, c, flag = out
             if status == "failed":
@@ -207,7 +191,7 @@ def _iterate(
             hessian = B if status == "optimal" else None
             return SolveResult(y, status, iterations, c, hessian)
     error0 = problem.error0
-    c, J = cons.evaluate(y) if linearization is None else linearization
+    c, J = cons.evaluate(y)
     rho = 1.0
     for iteration in range(1, max_iter + 1):
         if time.perf_counter() > deadline:

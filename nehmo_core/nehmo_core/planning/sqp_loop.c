@@ -186,14 +186,13 @@ int nehmo_qp_check(nehmo_daqp_quadprog quadprog, void* settings, int n, int m, d
   return nehmo_qp(quadprog, settings, n, m, B, grad, c, J, lo, hi, p, lam);
 }
 
-/* Returns a status (enum above); y, B, c (m,), J (m, n) hold the final iterate. With
- * linearized != 0, c and J already hold the constraints and their Jacobian at y on entry. */
+/* Returns a status (enum above); y, B, c (m,), J (m, n) hold the final iterate. */
 int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, double tau, double eps,
                       int ngroups, nehmo_group* groups, int nlin, const double* A,
                       const double* b, double* y, double* B, double* c, double* J, double tol,
                       double feasibility_tol, int max_iter, double deadline,
-                      nehmo_daqp_quadprog quadprog, void* settings, int linearized,
-                      int* iterations, int* qp_flag) {
+                      nehmo_daqp_quadprog quadprog, void* settings, int* iterations,
+                      int* qp_flag) {
   nehmo_problem prob = {n, m, ngroups, nlin, error0, ymax, tau, eps, groups, A, b};
   double grad[NEHMO_MAX_N], lo[NEHMO_MAX_N], hi[NEHMO_MAX_N], p[NEHMO_MAX_N];
   double y_new[NEHMO_MAX_N], s[NEHMO_MAX_N], r[NEHMO_MAX_N], lam[NEHMO_MAX_M];
@@ -202,7 +201,7 @@ int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, double ta
   *qp_flag = 0;
   *iterations = 0;
   if (n > NEHMO_MAX_N || m > NEHMO_MAX_M) return NEHMO_FAILED;
-  if (!linearized && nehmo_evaluate(&prob, y, c, J)) return NEHMO_EVAL_ERROR;
+  if (nehmo_evaluate(&prob, y, c, J)) return NEHMO_EVAL_ERROR;
   for (int iteration = 1; iteration <= max_iter; ++iteration) {
     double step_size = 0.0, low, violation, merit, slope, alpha, merit_new;
     int flag;
