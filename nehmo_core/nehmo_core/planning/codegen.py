@@ -44,7 +44,7 @@ import numpy as np
 from nehmo_core.errors import UnknownNameError
 from nehmo_core.robots.loader import cache_dir
 
-__all__ = ["BACKENDS", "CompiledFunction", "compact_weights", "compile_function"]
+__all__ = ["BACKENDS", "CompiledFunction", "compact_weights", "compile_function", "compile_library"]
 
 BACKENDS = ("auto", "compiled", "vm")
 """``compiled``: generated C (raise if that fails); ``vm``: CasADi's virtual machine;
@@ -305,10 +305,20 @@ def _build(fn: ca.Function, compiler: str, target: Path, compact: bool = True) -
         path = Path(tmp) / source
         text = _patch_kernel(path.read_text())
         path.write_text(compact_weights(text)[0] if compact else text)
+        compile_library(path, target, compiler)
+
+
+def compile_library(
+    source: Path, target: Path, compiler: str, flags: tuple[str, ...] = CFLAGS
+) -> None:
+    """Compile C ``source`` into the shared library ``target`` (written atomically: concurrent
+    builders never see a partial file)."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
         library = Path(tmp) / "lib.so"
-        cmd = [compiler, *CFLAGS, str(Path(tmp) / source), "-o", str(library), "-lm"]
+        cmd = [compiler, *flags, str(source), "-o", str(library), "-lm"]
         subprocess.run(cmd, check=True, capture_output=True, text=True)
-        os.replace(library, target)  # atomic: concurrent builders never see a partial file
+        os.replace(library, target)
 
 
 def compile_function(

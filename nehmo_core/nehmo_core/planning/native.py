@@ -19,7 +19,6 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import subprocess
-import tempfile
 import warnings
 import weakref
 from dataclasses import dataclass
@@ -30,7 +29,7 @@ import daqp
 import numpy as np
 
 from nehmo_core.errors import NehmoError
-from nehmo_core.planning.codegen import _compiler, _cpu
+from nehmo_core.planning.codegen import _compiler, _cpu, compile_library
 from nehmo_core.planning.opt import OptProblem
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots.loader import cache_dir
@@ -225,15 +224,6 @@ class NativeLoop:
         return STATUSES[code], iterations.value, y, B, c, flag.value
 
 
-def _build(compiler: str, target: Path) -> None:
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
-        library = Path(tmp) / "lib.so"
-        cmd = [compiler, *CFLAGS, str(SOURCE), "-o", str(library), "-lm"]
-        subprocess.run(cmd, check=True, capture_output=True, text=True)
-        library.replace(target)
-
-
 def _check(native: NativeLoop) -> str | None:
     """Compare the C QP path with ``daqp.solve`` (via :func:`.sqp.qp_step`); a reason if off."""
     from nehmo_core.planning.sqp import qp_step
@@ -272,7 +262,7 @@ def loop() -> NativeLoop | None:
     target = cache_dir() / "casadi" / f"nehmo_sqp_loop_{key}.so"
     try:
         if not target.exists():
-            _build(compiler, target)
+            compile_library(SOURCE, target, compiler, CFLAGS)
         native = NativeLoop(ctypes.CDLL(str(target)))
         reason = _check(native)
     except (OSError, AttributeError, subprocess.CalledProcessError) as exc:
