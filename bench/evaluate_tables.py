@@ -132,10 +132,15 @@ def _table_text(summary: dict[str, Any]) -> str:
             f"{', '.join(renamed)}: run before `nehmo` gained its self-clearance rows, with the "
             "same code as `nehmo_paper` now.\n"
         )
+    reruns: dict[tuple[str, ...], list[dict[str, Any]]] = {}
     for r in summary.get("rerun", []):
+        reruns.setdefault(tuple(r["rows"]), []).append(r)
+    for rows, runs in reruns.items():
+        times = "once" if len(runs) == 1 else f"{len(runs)} times"
         text += (
-            f"\nRows {', '.join(r['rows'])} were run again afterwards on the same scenarios "
-            f"({r['wall_seconds']:.0f} s wall); the others are from the first run.\n"
+            f"\nRows {', '.join(rows)} were run again afterwards on the same scenarios ({times}; "
+            f"the last run took {runs[-1]['wall_seconds']:.0f} s wall); the others are from the "
+            "first run.\n"
         )
     return text
 

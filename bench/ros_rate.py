@@ -108,7 +108,6 @@ def run(cell_name: str, model: str, seconds: float, out: Path) -> dict[str, Any]
                 "cell": cell.name,
                 "planner": "nehmo",
                 "model": model,
-                "allow_unmodelled": True,  # the outer arms of triple_ur5 are 1.2 m apart
             }
             argv = node_command("nehmo_ros.arm_planner", params, ["-r", f"__node:=p_{arm_id}"])
             procs.append(Process(arm_id, argv, env, out / f"planner_{arm_id}.log", 0))

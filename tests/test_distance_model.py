@@ -11,32 +11,47 @@ import pytest
 import torch
 
 from nehmo_core.errors import ModelFileError, UnknownNameError
-from nehmo_core.geometry.distance_data import exact_distances, pair_cell, uniform_samples
+from nehmo_core.geometry.distance_data import (
+    DatasetSpec,
+    generate,
+    pair_cell,
+    uniform_samples,
+)
 from nehmo_core.geometry.distance_model import (
     MODELS_DIR,
+    SHIPPED_DISTANCE_MODELS,
     load_distance_file,
     load_distance_model,
 )
 from nehmo_core.geometry.symmetry import robot_mirror_map
 
-PAIRS = ["ur5_ur5", "ur5_kinova"]
+PAIRS = list(SHIPPED_DISTANCE_MODELS)
+# pairs whose uniform joint samples include enough contacts for a spot check (the farther UR5
+# pairs touch only when both arms reach toward each other)
+CLOSE_PAIRS = ["ur5_ur5", "ur5_kinova"]
+
+
+# held-out mean error within 10 cm of contact, conservative offset included [m]; the 1.2 m pair
+# needs a larger offset for the same false-safe rate (README, Limitations)
+NEAR_MAE_BOUND = {"ur5_ur5_opposite": 0.025}
 
 
 @pytest.mark.parametrize("pair", PAIRS)
 def test_model_card_reports_accuracy(pair: str) -> None:
     card = json.loads((MODELS_DIR / f"distance_{pair}.json").read_text())
     acc = card["accuracy_held_out"]
-    assert acc["mae_near_m"] <= 0.015
+    assert acc["mae_near_m"] <= NEAR_MAE_BOUND.get(pair, 0.015)
     assert acc["false_safe_rate"] <= 0.02
     assert card["training"]["train_wall_time_s"] > 0
 
 
 @pytest.mark.parametrize("pair", PAIRS)
 def test_agrees_with_exact_distance_near_contact(pair: str) -> None:
-    """A fresh spot check (the full figures come from bench/distance_nets.py)."""
+    """A fresh spot check (the full figures come from bench/distance_nets.py): uniform samples,
+    plus samples around contact where uniform ones seldom touch (the farther UR5 pairs)."""
     model = load_distance_model(pair)
-    q = uniform_samples(pair, 2000, np.random.default_rng(123))
-    d = exact_distances(pair, q)
+    near_contact = 0 if pair in CLOSE_PAIRS else 2000
+    q, d = generate(DatasetSpec(pair, 2000, near_contact, seed=123), workers=1)
     pred = model.distance(q)
     near = d < 0.1
     assert near.sum() > 150 and (d < 0).sum() > 80

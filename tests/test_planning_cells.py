@@ -25,6 +25,7 @@ from nehmo_core.planning.pair_frame import (
     inverse_pose,
     match_pair,
     pose_from_matrix,
+    relative_pose,
 )
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.synthetic import random_value_function
@@ -139,6 +140,38 @@ def test_kinova_controlled_pairs_map_into_the_kinova_ur5_frame() -> None:
                 with torch.no_grad():
                     errors.append(abs(float(system.boundary(x)) - d))
     assert len(errors) > 20 and np.mean(errors) < 0.025  # as for the untouched cell
+
+
+@pytest.mark.parametrize(
+    ("cell_name", "expected"),
+    [
+        ("triple_ur5", ["ur5_ur5", "ur5_ur5_opposite"]),
+        ("five_ur5", ["ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite"]),
+    ],
+)
+def test_shipped_bc_sym_models_cover_every_pair_of_the_multi_ur5_cells(
+    cell_name: str, expected: list[str]
+) -> None:
+    """Every ordered arm pair maps onto one shipped bc+sym pair model, so nehmo constrains all
+    peers; the bc and DeepReach rows have the 0.6 m model only."""
+    from nehmo_core.geometry.distance_data import pair_cell
+
+    cell = load_cell(cell_name)
+    registry = ModelRegistry()
+    assert registry.sources_for("nehmo", cell) == expected
+    assert registry.sources_for("nehmo_paper", cell) == expected
+    assert registry.sources_for("nehmo_no_sym", cell) == ["ur5_ur5"]
+    geometry = []
+    for name in expected:
+        model_cell, a, b = pair_cell(name)
+        base2 = pose_from_matrix(relative_pose(model_cell.arm(a).base, model_cell.arm(b).base))
+        geometry.append(("ur5", "ur5", base2))
+    for own, peer in itertools.permutations(cell.arms, 2):
+        mapping = match_pair(own, peer, geometry)
+        assert mapping is not None, (own.arm_id, peer.arm_id)
+        gap = np.linalg.norm(np.subtract(own.base.xyz, peer.base.xyz))
+        used = geometry[mapping.model_index][2]
+        assert np.linalg.norm(used.xyz) == pytest.approx(gap)
 
 
 def test_unmodelled_and_far_peers_are_reported() -> None:

@@ -13,7 +13,8 @@ Value models come from *sources*, given on the command line as ``[KIND=]SOURCE``
   (:data:`SHIPPED_PAIRS`): in the UR5-Kinova cell, ``ur5_kinova`` for the UR5 and
   ``kinova_ur5`` (the Kinova-controls game) for the Kinova; for two UR5s, ``ur5_ur5`` (bases
   0.6 m apart) and, where the row's variant is shipped for it, ``ur5_ur5_diag`` (0.849 m, the
-  diagonal neighbours of the five-UR5 cell). Each peer uses the model whose base distance
+  diagonal neighbours of the five-UR5 cell) and ``ur5_ur5_opposite`` (1.2 m, the outer arms
+  facing each other across the centre arm in the three- and five-UR5 cells). Each peer uses the model whose base distance
   matches (:func:`~nehmo_core.planning.pair_frame.match_pair`).
 
 A row fails to build, naming the missing pair, when an Opt planner has a peer in reach that no
@@ -58,7 +59,7 @@ SYNTHETIC = "synthetic"
 _SYNTHETIC_PAIRS = {("ur5", "ur5"): "ur5_ur5", ("ur5", "kinova_gen3_6dof"): "ur5_kinova"}
 """(controlled robot, other robot) → pair with a synthetic stand-in (a learned-distance cell)."""
 SHIPPED_PAIRS: dict[tuple[str, str], tuple[str, ...]] = {
-    ("ur5", "ur5"): ("ur5_ur5", "ur5_ur5_diag"),
+    ("ur5", "ur5"): ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite"),
     ("ur5", "kinova_gen3_6dof"): ("ur5_kinova",),
     ("kinova_gen3_6dof", "ur5"): ("kinova_ur5",),
 }

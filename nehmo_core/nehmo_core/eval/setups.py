@@ -4,9 +4,11 @@ A :class:`Setup` names a cell, its time limit, its success rule, the arms whose 
 is reported (the centre arm of the three- and five-UR5 cells, like the paper) and an optional
 scenario filter (the UR5-Kinova challenging set keeps scenarios where the naive planners
 collide with each other). In the three- and five-UR5 cells the outer arms are 0.85 m or 1.2 m
-apart, a gap no trained pair model covers: like the authors, their planners constrain only the
-pairs with the centre arm, and the unconstrained peers are reported (telemetry, summaries).
-Collisions are checked among all pairs regardless.
+apart; the shipped bc+sym pair models ``ur5_ur5_diag`` and ``ur5_ur5_opposite`` cover those
+gaps, so ``nehmo`` and ``nehmo_paper`` constrain every pair. The other Opt rows (bc, DeepReach)
+have a model for 0.6 m only: like the authors' planners, they constrain the pairs with the
+centre arm, and the unconstrained peers are reported (telemetry, summaries). Collisions are
+checked among all pairs regardless.
 
 A *row* is one planner per arm, written ``nehmo`` (every arm) or ``nehmo/reckless`` (one kind
 per arm, in the cell's arm order).
@@ -56,7 +58,7 @@ class Setup:
     success_tolerance: float = 0.1  # [rad]
     timed_arms: tuple[str, ...] | None = None  # None: every arm
     scenario_filter: str | None = None
-    unmodelled_peers_ok: bool = False  # outer arms of 3/5-arm cells: no model for their gap
+    unmodelled_peers_ok: bool = False  # 3/5-arm cells: models only ship at 0.6 m for bc, DeepReach
     description: str = ""
 
     def __post_init__(self) -> None:

@@ -224,7 +224,7 @@ def load_distance_file(path: Path, expect_pair: str | None = None) -> PairDistan
     return model
 
 
-SHIPPED_DISTANCE_MODELS = ("ur5_ur5", "ur5_ur5_diag", "ur5_kinova")
+SHIPPED_DISTANCE_MODELS = ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite", "ur5_kinova")
 
 
 def load_distance_model(pair: str) -> PairDistanceModel:

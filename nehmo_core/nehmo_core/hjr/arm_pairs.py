@@ -17,7 +17,7 @@ from nehmo_core.geometry.distance_model import load_distance_model
 from nehmo_core.geometry.symmetry import robot_mirror_map
 from nehmo_core.hjr.systems import ArmPairSystem, JointInterval, register_system
 
-ARM_PAIRS = ("ur5_ur5", "ur5_ur5_diag", "ur5_kinova", "kinova_ur5")
+ARM_PAIRS = ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite", "ur5_kinova", "kinova_ur5")
 
 
 class SwappedBoundary(torch.nn.Module):

@@ -387,6 +387,7 @@ def _strip_prefix(tensors: dict[str, Tensor], prefix: str) -> dict[str, Tensor]:
 SHIPPED_VALUE_FUNCTIONS: dict[str, tuple[str, ...]] = {
     "ur5_ur5": ("bc+sym", "bc", "deepreach"),
     "ur5_ur5_diag": ("bc+sym",),
+    "ur5_ur5_opposite": ("bc+sym",),
     "ur5_kinova": ("bc+sym",),
     "kinova_ur5": ("bc+sym",),
 }
