@@ -7,8 +7,8 @@ Starts the node suite for cell ``five_ur5`` (one ``arm_planner`` per arm, ``sim_
 domain of its own, in wall time. The episode is scenario 0 of seed 0; to keep every arm moving
 for the whole run this script republishes each arm's goal every ``--goal-period`` seconds,
 alternating between the scenario's goal and start (the bridge runs with
-``stop_on_collision:=false`` and a success tolerance no arm reaches, so the episode never ends;
-collisions are counted). After ``--duration`` s the planners and the bridge get SIGINT, then the
+``stop_on_collision:=false`` and ``stop_on_success:=false``, so the episode never ends; collisions
+are counted). After ``--duration`` s the planners and the bridge get SIGINT, then the
 recorder, and the MCAP log is read.
 
 Reported (``bench/results/ros_load.json`` and ``.md``):
@@ -214,7 +214,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                 "scenarios": str(scenario_file),
                 "time_limit": args.duration + 600.0,
                 "stop_on_collision": False,
-                "success_tolerance": "0.000001",  # never reached: the episode runs on
+                "stop_on_success": False,  # arms at the scenario's goals: the episode runs on
                 "planners": "nehmo",
             },
         )

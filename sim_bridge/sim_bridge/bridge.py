@@ -32,8 +32,8 @@ the episode description (the evaluation's metadata JSON) on ``/nehmo/scenario``,
 starts only when every arm's command topic has a publisher, plus ``start_delay`` s for
 discovery to settle (at most ``start_timeout`` s of waiting). The episode ends at the first
 collision (with ``stop_on_collision``), when every arm is within ``success_tolerance`` of its
-goal, or at ``time_limit``; the arms then hold still, and with ``exit_when_done`` the node
-exits.
+goal (with ``stop_on_success``), or at ``time_limit``; the arms then hold still, and with
+``exit_when_done`` the node exits.
 """
 
 from __future__ import annotations
@@ -88,6 +88,7 @@ DEFAULTS: dict[str, Any] = {
     "success_norm": "l2",
     "success_tolerance": 0.1,
     "stop_on_collision": True,
+    "stop_on_success": True,
     "self_collision": True,
     "wait_for_planners": True,
     "start_timeout": 60.0,
@@ -116,6 +117,7 @@ class BridgeSettings:
     success_norm: str
     success_tolerance: float
     stop_on_collision: bool
+    stop_on_success: bool
     self_collision: bool
     wait_for_planners: bool
     start_timeout: float
@@ -195,6 +197,7 @@ class SimBridgeNode:
             success_norm=str(p["success_norm"]),
             success_tolerance=float(p["success_tolerance"]),
             stop_on_collision=bool(p["stop_on_collision"]),
+            stop_on_success=bool(p["stop_on_success"]),
             self_collision=bool(p["self_collision"]),
             wait_for_planners=bool(p["wait_for_planners"]),
             start_timeout=float(p["start_timeout"]),
@@ -416,7 +419,7 @@ class SimBridgeNode:
         )
         if collided and s.stop_on_collision:
             self.outcome = "collision"
-        elif reached:
+        elif reached and s.stop_on_success:
             self.outcome = "success"
         elif t >= s.time_limit - 1e-9:
             self.outcome = "time_limit"
