@@ -24,7 +24,7 @@ from nehmo_core.robots.model import Cell, RobotModel
 PAIRS: dict[str, tuple[str, str, str]] = {
     # pair name: (cell, arm 1, arm 2). Arm 1 sits at the origin, arm 2 facing it, 0.6 m away
     # (0.849 m for ``ur5_ur5_diag``, the diagonal neighbours of the five-UR5 cell; 1.2 m for
-    # ``ur5_ur5_opposite``, its opposite outer arms).
+    # ``ur5_ur5_opposite``, the outer arms of the three- and five-UR5 cells facing each other).
     "ur5_ur5": ("dual_ur5", "ur5_0", "ur5_1"),
     "ur5_ur5_diag": ("diagonal_ur5", "ur5_0", "ur5_1"),
     "ur5_ur5_opposite": ("opposite_ur5", "ur5_0", "ur5_1"),
