@@ -364,7 +364,7 @@ def markdown(r: dict[str, Any]) -> str:
         f" {r['collision_messages']} collision messages (colliding steps by pair, self-collisions"
         f" as a-a: {r['collision_steps_by_pair']}; "
         + (
-            "peers no given model covers were left unconstrained"
+            "planners could leave peers no given model covers unconstrained"
             if r.get("allow_unmodelled")
             else "every planner constrains every peer in reach"
         )
