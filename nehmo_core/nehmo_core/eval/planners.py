@@ -14,8 +14,8 @@ Value models come from *sources*, given on the command line as ``[KIND=]SOURCE``
   ``kinova_ur5`` (the Kinova-controls game) for the Kinova; for two UR5s, ``ur5_ur5`` (bases
   0.6 m apart) and, where the row's variant is shipped for it, ``ur5_ur5_diag`` (0.849 m, the
   diagonal neighbours of the five-UR5 cell) and ``ur5_ur5_opposite`` (1.2 m, the outer arms
-  facing each other across the centre arm in the three- and five-UR5 cells). Each peer uses the model whose base distance
-  matches (:func:`~nehmo_core.planning.pair_frame.match_pair`).
+  facing each other across the centre arm in the three- and five-UR5 cells). Each peer uses the
+  model whose base distance matches (:func:`~nehmo_core.planning.pair_frame.match_pair`).
 
 A row fails to build, naming the missing pair, when an Opt planner has a peer in reach that no
 model covers: such a peer would not be constrained at all.
