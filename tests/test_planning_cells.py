@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
-from nehmo_core.eval.planners import SHIPPED_PAIRS, ModelRegistry, build_planners
+from nehmo_core.eval.planners import SHIPPED_PAIRS, ModelRegistry, build_planners, pair_geometry
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr.networks import NetworkSettings
 from nehmo_core.planning.baselines import NaivePlanner, TrajectoryTracker, retime
@@ -25,7 +25,6 @@ from nehmo_core.planning.pair_frame import (
     inverse_pose,
     match_pair,
     pose_from_matrix,
-    relative_pose,
 )
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.synthetic import random_value_function
@@ -154,18 +153,12 @@ def test_shipped_bc_sym_models_cover_every_pair_of_the_multi_ur5_cells(
 ) -> None:
     """Every ordered arm pair maps onto one shipped bc+sym pair model, so nehmo constrains all
     peers; the bc and DeepReach rows have the 0.6 m model only."""
-    from nehmo_core.geometry.distance_data import pair_cell
-
     cell = load_cell(cell_name)
     registry = ModelRegistry()
     assert registry.sources_for("nehmo", cell) == expected
     assert registry.sources_for("nehmo_paper", cell) == expected
     assert registry.sources_for("nehmo_no_sym", cell) == ["ur5_ur5"]
-    geometry = []
-    for name in expected:
-        model_cell, a, b = pair_cell(name)
-        base2 = pose_from_matrix(relative_pose(model_cell.arm(a).base, model_cell.arm(b).base))
-        geometry.append(("ur5", "ur5", base2))
+    geometry = [pair_geometry(name) for name in expected]
     for own, peer in itertools.permutations(cell.arms, 2):
         mapping = match_pair(own, peer, geometry)
         assert mapping is not None, (own.arm_id, peer.arm_id)

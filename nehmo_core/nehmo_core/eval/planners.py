@@ -40,7 +40,7 @@ from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.pair_frame import inverse_pose, match_pair, pose_from_matrix, relative_pose
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.value_model import PairValueModel
-from nehmo_core.robots.model import Cell
+from nehmo_core.robots.model import Cell, Pose
 from nehmo_core.sim.scenarios import Scenario
 
 __all__ = [
@@ -49,6 +49,7 @@ __all__ = [
     "ModelRegistry",
     "ValueModelSource",
     "build_planners",
+    "pair_geometry",
     "parse_value_models",
     "snapshot_value_models",
     "swapped_pair_model",
@@ -279,15 +280,19 @@ class ModelRegistry:
         return [made[p] for p in pairs if p in made]
 
 
-def _cell_uses(pair: str, cell: Cell) -> bool:
-    """Whether some (own, peer) pair of ``cell`` maps onto the shipped pair model ``pair``."""
+def pair_geometry(pair: str) -> tuple[str, str, Pose]:
+    """``(robot 1, robot 2, base of arm 2 in arm 1's frame)`` of a named arm pair: what
+    :func:`~nehmo_core.planning.pair_frame.match_pair` takes per model."""
     from nehmo_core.geometry.distance_data import pair_cell
 
     model_cell, a, b = pair_cell(pair)
     arm1, arm2 = model_cell.arm(a), model_cell.arm(b)
-    model = [
-        (arm1.robot.name, arm2.robot.name, pose_from_matrix(relative_pose(arm1.base, arm2.base)))
-    ]
+    return arm1.robot.name, arm2.robot.name, pose_from_matrix(relative_pose(arm1.base, arm2.base))
+
+
+def _cell_uses(pair: str, cell: Cell) -> bool:
+    """Whether some (own, peer) pair of ``cell`` maps onto the shipped pair model ``pair``."""
+    model = [pair_geometry(pair)]
     return any(
         match_pair(own, peer, model) is not None
         for own in cell.arms
