@@ -24,6 +24,12 @@ pays for, and the stall escape) and ``nehmo_paper`` (the paper's Opt). Two more 
 the solver: ``nehmo, Python SQP loop`` (the same SQP iterating in Python instead of C, same
 answers) and ``nehmo, tight SQP`` (``sqp_tol`` 1e-7 rad, no screening). Like the planner nodes,
 the bench freezes its long-lived objects out of the garbage collector before timing.
+
+The timed arm's peers all sit at the 0.6 m of the ``ur5_ur5`` model. The other arms of the three-
+and five-UR5 cells also face peers at 0.85 m and 1.2 m; with ``--model shipped`` they carry the
+cell's other shipped pair models for those (``ur5_ur5_diag``, ``ur5_ur5_opposite``), so every
+pair of the closed loop is constrained, as in the evaluation. With ``--model random`` only the
+0.6 m pairs are (the random stand-in exists for that pair only).
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np
 import torch
 
+from nehmo_core.eval.planners import ModelRegistry
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr import load_value_function
 from nehmo_core.hjr.casadi_export import value_functions
@@ -55,6 +62,7 @@ from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.synthetic import planning_distance_model, random_value_function
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots import load_cell
+from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import Scenario, sample_scenario
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -109,6 +117,16 @@ def _episode(
                 iterations.append(result.telemetry.iterations)
         q = {a: q[a] + 0.1 * commands[a] for a in q}
     return times, statuses, iterations
+
+
+def far_models(registry: ModelRegistry, cell: Cell, model: PairValueModel) -> list[PairValueModel]:
+    """The cell's shipped pair models for base distances other than ``model``'s (the outer
+    arms' far peers), so that every pair of the closed loop is constrained."""
+    return [
+        m
+        for m in registry.models_for("nehmo", cell)
+        if not np.allclose(m.base2.xyz, model.base2.xyz)
+    ]
 
 
 def _floor(model: PairValueModel, peers: int, repeats: int = 2000) -> float:
@@ -207,16 +225,24 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
     ]
     variants.insert(1, (CASES[0], "nehmo, CasADi layout", VARIANTS["nehmo"], plain))
     timed: dict[str, tuple[list[float], list[str], list[int]]] = {}
+    registry = ModelRegistry()
     for case in CASES:
         cell_name, arm, peers = case
         cell = load_cell(cell_name)
         chosen = _scenarios(cell_name, scenarios, 200)
         mine = [(kind, settings, used) for c, kind, settings, used in variants if c == case]
+        far = far_models(registry, cell, model) if model_kind == "shipped" else []
         planners = {
-            kind: {a: NehmoPlanner(cell, a, [used], settings) for a in cell.arm_ids}
+            kind: {a: NehmoPlanner(cell, a, [used, *far], settings) for a in cell.arm_ids}
             for kind, settings, used in mine
         }
         assert all(len(p[arm].pairs) == peers for p in planners.values())
+        timed_models = {
+            p[arm].pairs[q].model_index for p in planners.values() for q in p[arm].pairs
+        }
+        assert timed_models == {0}, "the timed arm's peers must all use the bench's model"
+        if model_kind == "shipped":
+            assert all(not p.peers_unmodelled for ps in planners.values() for p in ps.values())
         # as the planner nodes do after start-up: long-lived objects out of the collector's
         # reach, so a full collection does not land inside a timed step
         gc.collect()

@@ -29,8 +29,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
 import torch
-from planning_speed import CASES, _scenarios
+from planning_speed import CASES, _scenarios, far_models
 
+from nehmo_core.eval.planners import ModelRegistry
 from nehmo_core.hjr import load_value_function
 from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver
 from nehmo_core.planning.opt import OptProblem
@@ -91,7 +92,8 @@ def _cell(
 ) -> dict[str, Any]:
     cell = load_cell(cell_name)
     solvers = {a: _Both() for a in cell.arm_ids}
-    planners = {a: NehmoPlanner(cell, a, [model], solver=solvers[a]) for a in cell.arm_ids}
+    models = [model, *far_models(ModelRegistry(), cell, model)]  # every pair constrained
+    planners = {a: NehmoPlanner(cell, a, models, solver=solvers[a]) for a in cell.arm_ids}
     for scenario in _scenarios(cell_name, scenarios, 200):
         q = {a: np.array(v) for a, v in scenario.start.items()}
         for p in planners.values():

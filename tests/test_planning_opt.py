@@ -256,6 +256,62 @@ def test_screened_sqp_returns_the_solution_of_the_whole_problem(
         assert rejoined >= 1  # the check after the reduced solve had rows to bring back
 
 
+def test_ipopt_solves_the_multi_peer_problem_the_sqp_solves(model) -> None:
+    """Several peers under one model enter IPOPT as one parameter block; its constraint values
+    must be those of :meth:`Constraints.evaluate` at its answer, and its answer the SQP's."""
+    reference = IpoptSolver(tol=1e-10, max_iter=300)
+    compared = 0
+    for problem in _multi_peer_problems(model, 13, 8, two_contacts=True):
+        assert problem.constraints.groups[0][1].shape[0] == 4  # four peers, one model
+        ref = reference.solve(problem, np.zeros(6))
+        c, _ = problem.constraints.evaluate(ref.y)
+        np.testing.assert_allclose(ref.constraint, c, atol=1e-9)
+        fast = solve_sqp(problem, np.zeros(6), tol=1e-9, screen=None)
+        if fast.status == "optimal" and ref.status == "optimal":
+            np.testing.assert_allclose(fast.y, ref.y, atol=2e-6)
+            compared += 1
+    assert compared >= 4
+
+
+def test_an_infeasible_linearization_at_the_warm_start_is_not_taken_for_an_infeasible_opt(
+    model,
+) -> None:
+    """From a warm start at a corner of the box (where the last tick's fail-safe leaves it) the
+    linearized QP may have no feasible point while Opt has a solution. The SQP must then start
+    again (from the naive step, then from y = 0) and return Opt's solution, not ``infeasible``."""
+    corners = np.array(list(itertools.product([-1.0, 1.0], repeat=6)))
+    rescued = 0
+    for problem in _multi_peer_problems(model, 22, 30):
+        ymax = problem.y_max
+        reference = solve_sqp(problem, np.zeros(6), tol=1e-9, screen=None)
+        for y0 in corners * ymax:
+            c, J = problem.constraints.evaluate(y0)
+            first = qp_step(
+                2.0 * np.eye(6), 2.0 * (problem.error0 + y0), c, J, -ymax - y0, ymax - y0
+            )
+            if first.flag != -1:
+                continue
+            result = solve_sqp(problem, y0, tol=1e-9, screen=None)
+            assert result.status == reference.status == "optimal"
+            assert result.iterations > 1  # the infeasible first start counts
+            np.testing.assert_allclose(result.y, reference.y, atol=1e-6)
+            assert result.constraint.min() >= -1e-7
+            rescued += 1
+    assert rescued >= 5
+
+
+def test_an_infeasible_opt_is_reported_after_every_start(model) -> None:
+    """No step reaches ``V ≥ ε`` when ε exceeds any value: every start's first QP is infeasible."""
+    problem = _multi_peer_problems(model, 12, 1)[0]
+    hopeless = replace(problem, constraints=replace(problem.constraints, epsilon=50.0))
+    warm = np.full(6, 0.5 * problem.y_max)
+    result = solve_sqp(hopeless, warm)
+    assert result.status == "infeasible"
+    assert result.iterations == 3  # the warm start, the naive step and y = 0, one QP each
+    # a warm start equal to the naive step is not tried twice
+    assert solve_sqp(hopeless, hopeless.naive_step()).iterations == 2
+
+
 def _assert_same_solve(a: SolveResult, b: SolveResult) -> None:
     assert a.status == b.status
     assert a.iterations == b.iterations

@@ -102,7 +102,7 @@ class IpoptSolver:
         if linear is not None and n_linear:
             parts.append(linear.A.T.ravel())  # column-major, as ca.vec
             lower.append(linear.b)
-        parts.extend(s.T.ravel() for _, s in cons.groups)
+        parts.extend(s.ravel() for _, s in cons.groups)  # (k, n) rows: ca.vec of (n, k)
         params, lbg = np.concatenate(parts), np.concatenate(lower)
         u_max = problem.y_max / problem.t_plan
         u0 = np.clip(np.asarray(y_start) / problem.t_plan, -u_max, u_max)

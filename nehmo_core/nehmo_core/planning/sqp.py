@@ -8,8 +8,8 @@
    and accept the step with a backtracking line search on the ℓ₁ merit function.
 3. Stop when a QP step, or the full step just taken, is below ``tol`` at a point whose
    constraint violation is below ``feasibility_tol`` (a KKT point, as IPOPT's); report
-   ``infeasible`` when a linearization has no feasible point and ``timeout`` when the deadline
-   passes.
+   ``infeasible`` when a linearization has no feasible point (after starting again from the
+   naive step and from ``y = 0``) and ``timeout`` when the deadline passes.
 
 The iterations run in C (:mod:`.native`) when every pair model has generated code; the Python
 loop below is the same algorithm and the fallback.
@@ -116,7 +116,9 @@ def solve_sqp(
     Converged when a QP step, or a full step just taken, is no longer than ``tol`` [rad] in
     every joint, at a point that violates no constraint by more than ``feasibility_tol`` [m].
     ``hessian`` warm-starts the Lagrangian Hessian approximation (e.g. the previous tick's);
-    the default is the cost's ``2I``.
+    the default is the cost's ``2I``. ``infeasible`` means that the iterations met a
+    linearization without a feasible point from ``y_start``, from the naive step and from
+    ``y = 0`` (each tried once).
 
     ``screen`` [m]: with several V rows, the iterations carry only those below ``screen`` at the
     naive step (their values there are at hand), so each iteration evaluates fewer pairs. At a
@@ -129,16 +131,51 @@ def solve_sqp(
     rounding. ``False`` forces the Python loop.
     """
     cons = problem.constraints
-    y = problem.naive_step()
-    c, _ = cons.evaluate(y)
+    naive = problem.naive_step()
+    c, _ = cons.evaluate(naive)
     if _shortfall(c) == 0.0:
-        return SolveResult(y, "naive", 0, c)
-    n, ymax, rows = len(y), problem.y_max, cons.value_count
+        return SolveResult(naive, "naive", 0, c)
+    n, ymax, rows = len(naive), problem.y_max, cons.value_count
     B = 2.0 * np.eye(n) if hessian is None or hessian.shape != (n, n) else hessian.copy()
     keep = np.ones(rows, dtype=bool)
     if screen is not None and rows > 1:
         keep = c[:rows] < screen
     y = np.minimum(np.maximum(y_start, -ymax), ymax)
+    args = (tol, deadline, feasibility_tol, screen, native)
+    result = _screened(problem, y, B, keep, max_iter, *args)
+    # A linearization without a feasible point shows that the QP is infeasible, not Opt: from a
+    # warm start far from the solution (e.g. the last tick's fail-safe step, at a corner of the
+    # box) it often is not. Before the fail-safe, the iterations start again from the naive step
+    # and from standing still (y = 0), unless they started there already.
+    tried = [y]
+    for start in (naive, np.zeros(n)):
+        used = result.iterations
+        if result.status != "infeasible" or used >= max_iter:
+            break
+        if any(np.array_equal(start, t) for t in tried):
+            continue
+        tried.append(start)
+        result = _screened(problem, start, B, keep, max_iter - used, *args)
+        result = replace(result, iterations=used + result.iterations)
+    return result
+
+
+def _screened(
+    problem: OptProblem,
+    y: np.ndarray,
+    B: np.ndarray,
+    keep: np.ndarray,
+    max_iter: int,
+    tol: float,
+    deadline: float,
+    feasibility_tol: float,
+    screen: float | None,
+    native: bool,
+) -> SolveResult:
+    """The SQP iterations from ``y`` on the V rows where ``keep``, adding the rows a solution
+    breaks (or brings below ``screen``) until it holds them all (see :func:`solve_sqp`)."""
+    cons, rows = problem.constraints, problem.constraints.value_count
+    keep = keep.copy()
     used = 0
     while True:
         if keep.all():
