@@ -118,6 +118,12 @@ def _merge(previous: Path, summary: dict[str, Any], order: tuple[str, ...]) -> d
     rank = {row: i for i, row in enumerate(order)}
     merged["rows"] = sorted(rows, key=lambda r: rank.get(r["row"], len(rank)))
     rerun = {"rows": [r["row"] for r in summary["rows"]]}
+    # a row carried over from the first run under a new name is now a fresh row of that name
+    renamed = {k: v for k, v in old.get("renamed", {}).items() if v not in rerun["rows"]}
+    if renamed:
+        merged["renamed"] = renamed
+    else:
+        merged.pop("renamed", None)
     rerun.update({k: summary[k] for k in ("load_average_at_start", "wall_seconds", "workers")})
     merged["rerun"] = [*old.get("rerun", []), rerun]
     return merged

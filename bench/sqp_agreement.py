@@ -12,7 +12,10 @@ relative cost difference, the smallest constraint value of the default answer, a
 both solves (median and p95 over the constrained steps). The default solver iterates in C; each
 problem is also solved by its Python loop (``sqp_native=False``, the same algorithm), and the
 last columns say how often the two agree on status and iteration count and how far their steps
-are apart.
+are apart. Where the default reports ``infeasible`` (the planner falls back to its fail-safe),
+IPOPT (tol 1e-8, up to 300 iterations, same warm start) tries the problem as well: the last
+column counts the steps where it finds a point satisfying every constraint within 1e-6 m, i.e.
+fail-safe steps that Opt did not need.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from planning_speed import CASES, _scenarios, far_models
 
 from nehmo_core.eval.planners import ModelRegistry
 from nehmo_core.hjr import load_value_function
+from nehmo_core.planning.ipopt_solver import IpoptSolver
 from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver
 from nehmo_core.planning.opt import OptProblem
 from nehmo_core.planning.sqp import SolveResult, solve_sqp
@@ -47,6 +51,7 @@ class _Both:
 
     def __init__(self) -> None:
         self.default = SqpSolver()
+        self.ipopt = IpoptSolver(tol=1e-8, max_iter=300)
         self.record = False
         self.rows: list[dict[str, Any]] = []
 
@@ -64,6 +69,11 @@ class _Both:
             tight = solve_sqp(problem, y_start, 1e-9, 100, np.inf, hessian, screen=None)
             end = time.perf_counter()
             python = solve_sqp(problem, y_start, hessian=hessian, native=False)
+            ipopt_found = None
+            if fast.status == "infeasible":
+                ref = self.ipopt.solve(problem, y_start)
+                c, _ = problem.constraints.evaluate(ref.y)
+                ipopt_found = ref.status == "optimal" and float(c.min()) >= -1e-6
             both = fast.status == tight.status == "optimal"
             self.rows.append(
                 {
@@ -77,6 +87,7 @@ class _Both:
                         else None
                     ),
                     "min_c": float(fast.constraint.min()) if fast.success else None,
+                    "ipopt_found": ipopt_found,
                     "python_same": python.status == fast.status
                     and python.iterations == fast.iterations,
                     "python_dy": float(np.abs(fast.y - python.y).max()),
@@ -127,6 +138,8 @@ def _cell(
         },
         "relative_cost_difference_max": float(dcost.max()),
         "python_loop_same_status_and_iterations": sum(r["python_same"] for r in rows),
+        "infeasible_steps": sum(r["fast"] == "infeasible" for r in rows),
+        "infeasible_but_ipopt_solved": sum(bool(r["ipopt_found"]) for r in rows),
         "python_loop_dy_max_rad": max(r["python_dy"] for r in rows),
         "min_constraint_default": min(r["min_c"] for r in rows if r["min_c"] is not None),
         "constrained_solve_ms": {
@@ -148,8 +161,9 @@ def markdown(report: dict[str, Any]) -> str:
         "| cell (peers) | steps | statuses default / tight | both optimal | max joint difference "
         "median / p95 / max [rad] | max relative cost difference | min V − ε of default [m] "
         "| constrained solve ms, default median / p95 | tight median / p95 "
-        "| C loop = Python loop (status and iterations) | max C − Python step difference [rad] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| C loop = Python loop (status and iterations) | max C − Python step difference [rad] "
+        "| default infeasible: IPOPT finds a solution |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in report["cells"]:
         d, t = c["dy_rad"], c["constrained_solve_ms"]
@@ -161,7 +175,8 @@ def markdown(report: dict[str, Any]) -> str:
             f"{t['default_median']:.2f} / {t['default_p95']:.2f} | "
             f"{t['tight_median']:.2f} / {t['tight_p95']:.2f} | "
             f"{c['python_loop_same_status_and_iterations']} of {c['steps']} | "
-            f"{c['python_loop_dy_max_rad']:.1e} |"
+            f"{c['python_loop_dy_max_rad']:.1e} | "
+            f"{c['infeasible_but_ipopt_solved']} of {c['infeasible_steps']} |"
         )
     return "\n".join(lines) + "\n"
 
