@@ -11,11 +11,11 @@ import pytest
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.hjr.networks import NetworkSettings
-from nehmo_core.planning import native
+from nehmo_core.planning import native, sqp
 from nehmo_core.planning.baselines import NaivePlanner
 from nehmo_core.planning.ipopt_solver import IpoptSolver
 from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver, make_solver
-from nehmo_core.planning.opt import OptProblem, worst_case_disturbance
+from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.sqp import SolveResult, qp_step, solve_sqp
 from nehmo_core.planning.synthetic import random_value_function
@@ -310,6 +310,50 @@ def test_an_infeasible_opt_is_reported_after_every_start(model) -> None:
     assert result.iterations == 3  # the warm start, the naive step and y = 0, one QP each
     # a warm start equal to the naive step is not tried twice
     assert solve_sqp(hopeless, hopeless.naive_step()).iterations == 2
+
+
+def test_the_naive_steps_rows_are_evaluated_once(model, monkeypatch) -> None:
+    """The naive step's rows, evaluated for the safety check, serve a start from the naive step
+    (the first start or a restart): an infeasible Opt costs one evaluation per distinct start."""
+    problem = _multi_peer_problems(model, 12, 1)[0]
+    hopeless = replace(problem, constraints=replace(problem.constraints, epsilon=50.0))
+    calls = []
+    evaluate = Constraints.evaluate
+    monkeypatch.setattr(
+        Constraints, "evaluate", lambda self, y: calls.append(y.copy()) or evaluate(self, y)
+    )
+    warm = np.full(6, 0.5 * problem.y_max)
+    for start, starts in ((warm, 3), (hopeless.naive_step(), 2)):
+        calls.clear()
+        result = solve_sqp(hopeless, start, native=False)
+        assert result.status == "infeasible"
+        assert len(calls) == starts  # naive (the check), the warm start if apart, y = 0
+        np.testing.assert_array_equal(calls[0], hopeless.naive_step())
+
+
+def test_c_and_python_loops_agree_from_the_naive_step_and_on_shared_constraints(model) -> None:
+    """Starting at the naive step hands its rows to the loop (both loops, screened or not);
+    the C loop keeps per-constraints arguments, so two costs over the same constraints must
+    each get their own answer."""
+    problems = _multi_peer_problems(model, 14, 12, two_contacts=True)
+    solved = 0
+    for problem in problems:
+        other = replace(problem, error0=-problem.error0[::-1].copy())
+        for p in (problem, other, problem):  # the C loop's cached arguments are reused
+            for screen in (None, 0.1):
+                naive = p.naive_step()
+                py = solve_sqp(p, naive, screen=screen, native=False)
+                _assert_same_solve(solve_sqp(p, naive, screen=screen), py)
+                if py.status == "optimal":
+                    assert py.constraint.min() >= -1e-7
+                    solved += 1
+            # the rows handed over are those the loop would have evaluated itself
+            c, J = p.constraints.evaluate(naive)
+            keep = c[: p.constraints.value_count] < 0.1
+            for in_c in (True, False):
+                args = (p, naive, 2.0 * np.eye(6), keep, 30, 1e-5, np.inf, 1e-7, 0.1, in_c)
+                _assert_same_solve(sqp._screened(*args, (c, J)), sqp._screened(*args, None))
+    assert solved >= 10
 
 
 def _assert_same_solve(a: SolveResult, b: SolveResult) -> None:

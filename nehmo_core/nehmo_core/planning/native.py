@@ -24,6 +24,7 @@ import weakref
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+from typing import cast
 
 import daqp
 import numpy as np
@@ -61,6 +62,16 @@ class _Group(ctypes.Structure):
     ]
 
 
+@dataclass(frozen=True)
+class _Prepared:
+    """The arguments of ``nehmo_sqp_iterate`` fixed by the constraints, and their memory."""
+
+    fixed: tuple[object, ...]  # τ, ε, groups, group structs, nlin, A, b
+    structs: ctypes.Array[_Group]
+    alive: list[np.ndarray]
+    m: int
+
+
 @dataclass
 class _ModelHandle:
     """A pair model's generated V/∇V function: its C pointer and work arrays."""
@@ -91,7 +102,7 @@ class NativeLoop:
         self.iterate_fn = library.nehmo_sqp_iterate
         self.iterate_fn.restype = _I
         self.iterate_fn.argtypes = [_I, _I, _P, _D, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
-        self.iterate_fn.argtypes += [_D, _D, _I, _D, _P, _P, _P, _P]
+        self.iterate_fn.argtypes += [_I, _D, _D, _I, _D, _P, _P, _P, _P]
         self.qp_fn = library.nehmo_qp_check
         self.qp_fn.restype = _I
         self.qp_fn.argtypes = [_P, _P, _I, _I, _P, _P, _P, _P, _P, _P, _P, _P]
@@ -148,6 +159,48 @@ class NativeLoop:
         self._models[model] = handle
         return handle
 
+    def _prepare(self, problem: OptProblem) -> _Prepared | None:
+        """The C side's view of ``problem``'s constraints (kept on them: the restarts of one
+        solve reuse it), or ``None`` when a model has no C handle or the problem is too big."""
+        cons = problem.constraints
+        scratch = cons.scratch
+        if "native" in scratch:
+            return cast("_Prepared | None", scratch["native"])
+        models, groups, linear = cons.models, cons.groups, cons.linear
+        n = len(problem.error0)  # the C loop's sizes bound n and m
+        structs = (_Group * max(len(groups), 1))()
+        alive: list[np.ndarray] = []  # arrays the C side reads, kept referenced with the structs
+        m = 0
+        prepared: _Prepared | None = None
+        for slot, (index, states) in zip(structs, groups, strict=False):
+            handle = self.model(models[index])
+            if handle is None:
+                break
+            states = np.ascontiguousarray(states, dtype=np.float64)
+            alive.append(states)
+            slot.fn, slot.iw, slot.w = handle.fn, handle.iw.ctypes.data, handle.w.ctypes.data
+            slot.n, slot.k = states.shape[1], states.shape[0]
+            slot.states = states.ctypes.data
+            slot.x, slot.g = handle.x.ctypes.data, handle.g.ctypes.data
+            slot.arg, slot.res = handle.arg.ctypes.data, handle.res.ctypes.data
+            m += states.shape[0]
+        else:
+            nlin, A, b = 0, None, None
+            if linear is not None:
+                A = np.ascontiguousarray(linear.A, dtype=np.float64)
+                b = np.ascontiguousarray(linear.b, dtype=np.float64)
+                alive += [A, b]
+                nlin = len(b)
+            m += nlin
+            if n <= MAX_N and m <= MAX_M:
+                fixed: tuple[object, ...] = (cons.t_safe, cons.epsilon, len(groups))
+                fixed += (ctypes.addressof(structs), nlin)
+                fixed += (A.ctypes.data if A is not None else None,)
+                fixed += (b.ctypes.data if b is not None else None,)
+                prepared = _Prepared(fixed, structs, alive, m)
+        scratch["native"] = prepared
+        return prepared
+
     def iterate(
         self,
         problem: OptProblem,
@@ -157,59 +210,37 @@ class NativeLoop:
         max_iter: int,
         deadline: float,
         feasibility_tol: float,
+        start_values: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> tuple[str, int, np.ndarray, np.ndarray, np.ndarray, int] | None:
         """Run the C loop on ``problem`` from ``y`` with Hessian approximation ``B``;
         ``(status, iterations, y, B, c, QP flag)``, or ``None`` when a model has no C handle or
-        the problem exceeds the C loop's sizes."""
-        cons = problem.constraints
-        models, groups, linear = cons.models, cons.groups, cons.linear
-        n = len(y)
-        structs = (_Group * max(len(groups), 1))()
-        alive = []  # arrays the C side reads, kept referenced until it returns
-        m = 0
-        for slot, (index, states) in zip(structs, groups, strict=False):
-            handle = self.model(models[index])
-            if handle is None:
-                return None
-            states = np.ascontiguousarray(states, dtype=np.float64)
-            alive.append(states)
-            slot.fn, slot.iw, slot.w = handle.fn, handle.iw.ctypes.data, handle.w.ctypes.data
-            slot.n, slot.k = states.shape[1], states.shape[0]
-            slot.states = states.ctypes.data
-            slot.x, slot.g = handle.x.ctypes.data, handle.g.ctypes.data
-            slot.arg, slot.res = handle.arg.ctypes.data, handle.res.ctypes.data
-            m += states.shape[0]
-        nlin = 0
-        A = b = None
-        if linear is not None:
-            A = np.ascontiguousarray(linear.A, dtype=np.float64)
-            b = np.ascontiguousarray(linear.b, dtype=np.float64)
-            nlin = len(b)
-        m += nlin
-        if n > MAX_N or m > MAX_M:
+        the problem exceeds the C loop's sizes. ``start_values``: the rows' ``(c, J)`` at ``y``,
+        when the caller has them (saves the first evaluation)."""
+        prepared = self._prepare(problem)
+        if prepared is None:
             return None
+        n, m = len(y), prepared.m
+        e0 = np.ascontiguousarray(problem.error0, dtype=np.float64)
         y = np.array(y, dtype=np.float64)
         B = np.array(B, dtype=np.float64, order="C")
-        c = np.empty(m)
-        J = np.empty((m, n))
-        e0 = np.ascontiguousarray(problem.error0, dtype=np.float64)
+        if start_values is None:
+            c, J, evaluated = np.empty(m), np.empty((m, n)), 0
+        else:
+            c = np.array(start_values[0], dtype=np.float64)
+            J = np.array(start_values[1], dtype=np.float64, order="C")
+            evaluated = 1
         iterations, flag = ctypes.c_int(), ctypes.c_int()
         code = self.iterate_fn(
             n,
             m,
             e0.ctypes.data,
             problem.y_max,
-            cons.t_safe,
-            cons.epsilon,
-            len(groups),
-            ctypes.addressof(structs),
-            nlin,
-            A.ctypes.data if A is not None else None,
-            b.ctypes.data if b is not None else None,
+            *prepared.fixed,
             y.ctypes.data,
             B.ctypes.data,
             c.ctypes.data,
             J.ctypes.data,
+            evaluated,
             tol,
             feasibility_tol,
             max_iter,

@@ -42,6 +42,11 @@ class Constraints:
     linear: SelfClearanceRows | None = None  # self-clearance rows A·y ≥ b, after the V rows
 
     @cached_property
+    def scratch(self) -> dict[str, object]:
+        """Per-instance memory for solvers (e.g. the C loop's prepared arguments)."""
+        return {}
+
+    @cached_property
     def count(self) -> int:
         extra = self.linear.count if self.linear is not None else 0
         return self.value_count + extra

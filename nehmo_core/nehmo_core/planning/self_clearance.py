@@ -101,16 +101,30 @@ class SelfClearance:
             (a, b, self._world.link_index("self", a), self._world.link_index("self", b))
             for a, b in robot.self_collision_pairs()
         ]
-        # PyBullet's Jacobian columns follow its movable joints; map them onto our joint order
-        movable = [
-            j
-            for j in range(pb.getNumJoints(self._body, physicsClientId=self._client))
-            if pb.getJointInfo(self._body, j, physicsClientId=self._client)[2] != pb.JOINT_FIXED
-        ]
         ours = self._world.joint_indices("self")
-        self._movable = movable
-        self._columns = [movable.index(j) for j in ours]
-        self._extra = [j for j in movable if j not in ours]
+        # for the Jacobian: each of our joints' axis (in its child link's URDF frame) and kind,
+        # and per link the columns of the joints that move it (the link's own and its ancestors')
+        self._joints = ours
+        self._axes = np.empty((len(ours), 3))
+        self._prismatic = np.zeros(len(ours), dtype=bool)
+        parent = {}
+        for j in range(pb.getNumJoints(self._body, physicsClientId=self._client)):
+            info = pb.getJointInfo(self._body, j, physicsClientId=self._client)
+            parent[j] = info[16]
+            if j in ours:
+                k = ours.index(j)
+                self._axes[k] = info[13]
+                self._prismatic[k] = info[2] == pb.JOINT_PRISMATIC
+        self._axis_lists = self._axes.tolist()
+        self._moves: dict[int, np.ndarray] = {}  # per link: which of our joints move it
+        for _, _, la, lb in self._pairs:
+            for link in (la, lb):
+                moves, j = np.zeros(len(ours), dtype=bool), link
+                while j >= 0:
+                    if j in ours:
+                        moves[ours.index(j)] = True
+                    j = parent[j]
+                self._moves[link] = moves
 
         self._last: tuple[np.ndarray, SelfClearanceRows] | None = None
         self._swapped = {(a, b): False for a, b, _, _ in self._pairs}
@@ -151,22 +165,46 @@ class SelfClearance:
     def close(self) -> None:
         self._world.close()
 
-    def _jacobian(self, link: int, point: np.ndarray, q_all: list[float]) -> np.ndarray:
-        """Positional Jacobian (3, n) of a world point fixed to ``link`` (zero on the base)."""
-        n = self.robot.dof
-        if link < 0:
-            return np.zeros((3, n))
-        # calculateJacobian takes the point in the URDF link frame (state entries 4 and 5)
-        state = pb.getLinkState(
-            self._body, link, computeForwardKinematics=True, physicsClientId=self._client
+    def _gradients(
+        self,
+        normal: np.ndarray,
+        p_a: np.ndarray,
+        p_b: np.ndarray,
+        link_a: list[int],
+        link_b: list[int],
+    ) -> np.ndarray:
+        """Row ``i``: ``nᵢᵀ(J_a(p_a,ᵢ) − J_b(p_b,ᵢ))`` (r, n) at the posed ``q``, for world points
+        ``p_a``, ``p_b`` (r, 3) fixed to links ``link_a``, ``link_b`` and unit normals (r, 3).
+
+        A revolute joint ``j`` (world origin ``oⱼ``, axis ``zⱼ``) moves a point ``p`` of a link
+        it drives by ``zⱼ × (p − oⱼ)`` per radian, whose component along ``n`` is
+        ``(n × zⱼ)·(p − oⱼ)``; a prismatic joint moves it by ``zⱼ``. (Written for the few
+        rows of a step: a handful of array operations in all, not a Jacobian per row.)"""
+        states = pb.getLinkStates(
+            self._body, self._joints, computeForwardKinematics=True, physicsClientId=self._client
         )
-        inv_pos, inv_orn = pb.invertTransform(state[4], state[5])
-        local = pb.multiplyTransforms(inv_pos, inv_orn, point.tolist(), (0, 0, 0, 1))[0]
-        zeros = [0.0] * len(q_all)
-        linear, _ = pb.calculateJacobian(
-            self._body, link, local, q_all, zeros, zeros, physicsClientId=self._client
+        origins = np.array([s[4] for s in states])  # the joints' child link frames
+        axes = np.array(
+            [pb.rotateVector(s[5], a) for s, a in zip(states, self._axis_lists, strict=True)]
         )
-        return np.asarray(linear, dtype=np.float64)[:, self._columns]
+        moves_a = np.array([self._moves[k] for k in link_a], dtype=np.float64)  # (r, n) 0/1
+        moves_b = np.array([self._moves[k] for k in link_b], dtype=np.float64)
+        # the point each joint sees, its lever arm weighted by which side it moves (r, n, 3)
+        lever = moves_a[:, :, None] * (p_a[:, None, :] - origins)
+        lever -= moves_b[:, :, None] * (p_b[:, None, :] - origins)
+        # (n × z)·lever = n·(z × lever)
+        z = axes[None, :, :]
+        turn = np.empty_like(lever)
+        turn[..., 0] = z[..., 1] * lever[..., 2] - z[..., 2] * lever[..., 1]
+        turn[..., 1] = z[..., 2] * lever[..., 0] - z[..., 0] * lever[..., 2]
+        turn[..., 2] = z[..., 0] * lever[..., 1] - z[..., 1] * lever[..., 0]
+        grad = np.einsum("rjk,rk->rj", turn, normal)
+        if self._prismatic.any():
+            slide = normal @ axes[self._prismatic].T
+            grad[:, self._prismatic] = slide * (
+                moves_a[:, self._prismatic] - moves_b[:, self._prismatic]
+            )
+        return grad
 
     def distances(self, q: np.ndarray) -> dict[tuple[str, str], float]:
         """Signed distance [m] of every self-collision link pair within ``influence``."""
@@ -194,8 +232,7 @@ class SelfClearance:
     def _rows(self, q: np.ndarray) -> SelfClearanceRows:
         n = self.robot.dof
         self._world.set_joint_positions("self", q)
-        q_all: list[float] | None = None
-        A, b, d_all, names = [], [], [], []
+        near = []  # (pair, d, p_a, p_b, normal from p_b to p_a) of the pairs within influence
         for a, b_link, la, lb in self._pairs:
             pts = pb.getClosestPoints(
                 self._body, self._body, self.influence, la, lb, physicsClientId=self._client
@@ -203,23 +240,28 @@ class SelfClearance:
             if not pts:
                 continue
             p = min(pts, key=lambda h: h[8])
-            d = float(p[8])
-            p_a, p_b = np.asarray(p[5]), np.asarray(p[6])
-            normal = np.asarray(p[7])  # contact normal on B, pointing towards A
             if self._swapped[(a, b_link)]:
-                p_a, p_b, normal = p_b, p_a, -normal
-            if q_all is None:
-                q_all = [
-                    pb.getJointState(self._body, j, physicsClientId=self._client)[0]
-                    for j in self._movable
-                ]
-            grad = normal @ (self._jacobian(la, p_a, q_all) - self._jacobian(lb, p_b, q_all))
-            if float(np.abs(grad).max()) < MIN_GRADIENT:
-                continue  # no step changes this distance (to first order): nothing to constrain
-            A.append(grad)
-            b.append(-self.gain * max(d - self.safety, 0.0))
-            d_all.append(d)
-            names.append((a, b_link))
-        if not A:
+                near.append(((a, b_link, la, lb), p[8], p[6], p[5], [-v for v in p[7]]))
+            else:
+                near.append(((a, b_link, la, lb), p[8], p[5], p[6], p[7]))
+        if not near:
             return _empty_rows(n)
-        return SelfClearanceRows(np.array(A), np.array(b), np.array(d_all), tuple(names))
+        pairs, dist, p_a, p_b, normal = zip(*near, strict=True)
+        A = self._gradients(
+            np.array(normal),
+            np.array(p_a),
+            np.array(p_b),
+            [x[2] for x in pairs],
+            [x[3] for x in pairs],
+        )
+        d = np.array(dist, dtype=np.float64)
+        # rows no step changes (to first order) constrain nothing
+        moving = np.abs(A).max(axis=1) >= MIN_GRADIENT
+        if not moving.any():
+            return _empty_rows(n)
+        return SelfClearanceRows(
+            A[moving],
+            -self.gain * np.maximum(d[moving] - self.safety, 0.0),
+            d[moving],
+            tuple((x[0], x[1]) for x, keep in zip(pairs, moving, strict=True) if keep),
+        )

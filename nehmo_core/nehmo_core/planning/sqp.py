@@ -132,7 +132,7 @@ def solve_sqp(
     """
     cons = problem.constraints
     naive = problem.naive_step()
-    c, _ = cons.evaluate(naive)
+    c, J = cons.evaluate(naive)
     if _shortfall(c) == 0.0:
         return SolveResult(naive, "naive", 0, c)
     n, ymax, rows = len(naive), problem.y_max, cons.value_count
@@ -142,7 +142,11 @@ def solve_sqp(
         keep = c[:rows] < screen
     y = np.minimum(np.maximum(y_start, -ymax), ymax)
     args = (tol, deadline, feasibility_tol, screen, native)
-    result = _screened(problem, y, B, keep, max_iter, *args)
+
+    def at(start: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        return (c, J) if np.array_equal(start, naive) else None  # the naive step's rows: at hand
+
+    result = _screened(problem, y, B, keep, max_iter, *args, at(y))
     # A linearization without a feasible point shows that the QP is infeasible, not Opt: from a
     # warm start far from the solution (e.g. the last tick's fail-safe step, at a corner of the
     # box) it often is not. Before the fail-safe, the iterations start again from the naive step
@@ -155,7 +159,7 @@ def solve_sqp(
         if any(np.array_equal(start, t) for t in tried):
             continue
         tried.append(start)
-        result = _screened(problem, start, B, keep, max_iter - used, *args)
+        result = _screened(problem, start, B, keep, max_iter - used, *args, at(start))
         result = replace(result, iterations=used + result.iterations)
     return result
 
@@ -171,22 +175,30 @@ def _screened(
     feasibility_tol: float,
     screen: float | None,
     native: bool,
+    start_values: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SolveResult:
     """The SQP iterations from ``y`` on the V rows where ``keep``, adding the rows a solution
-    breaks (or brings below ``screen``) until it holds them all (see :func:`solve_sqp`)."""
+    breaks (or brings below ``screen``) until it holds them all (see :func:`solve_sqp`).
+    ``start_values``: every row's ``(c, J)`` at ``y``, when the caller has them."""
     cons, rows = problem.constraints, problem.constraints.value_count
     keep = keep.copy()
     used = 0
     while True:
+        budget = max_iter - used
         if keep.all():
             result = _iterate(
-                problem, y, B, tol, max_iter - used, deadline, feasibility_tol, native
+                problem, y, B, tol, budget, deadline, feasibility_tol, native, start_values
             )
             return replace(result, iterations=used + result.iterations)
-        reduced = replace(problem, constraints=cons.subset(keep))
-        result = _iterate(reduced, y, B, tol, max_iter - used, deadline, feasibility_tol, native)
-        used += result.iterations
         carried = np.concatenate([np.flatnonzero(keep), np.arange(rows, cons.count)])
+        reduced = replace(problem, constraints=cons.subset(keep))
+        if start_values is not None:
+            start_values = (start_values[0][carried], start_values[1][carried])
+        result = _iterate(
+            reduced, y, B, tol, budget, deadline, feasibility_tol, native, start_values
+        )
+        start_values = None  # the next round starts at the solution, not at y
+        used += result.iterations
         if not result.success:
             full = np.full(cons.count, np.nan)  # rows screened out were not evaluated at y
             full[carried] = result.constraint
@@ -215,12 +227,14 @@ def _iterate(
     deadline: float,
     feasibility_tol: float,
     native: bool = False,
+    start_values: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SolveResult:
     """SQP iterations on ``problem`` from ``y`` with Hessian approximation ``B`` (in C when
-    ``native`` and the C loop can evaluate every model, else in Python)."""
+    ``native`` and the C loop can evaluate every model, else in Python); ``start_values`` are
+    the rows' ``(c, J)`` at ``y`` if the caller has them."""
     cons, ymax, n = problem.constraints, problem.y_max, len(y)
     if native and (c_loop := loop()) is not None:
-        out = c_loop.iterate(problem, y, B, tol, max_iter, deadline, feasibility_tol)
+        out = c_loop.iterate(problem, y, B, tol, max_iter, deadline, feasibility_tol, start_values)
         if out is not None:
             status, iterations, y, B, c, flag = out
             if status == "failed":
@@ -228,7 +242,7 @@ def _iterate(
             hessian = B if status == "optimal" else None
             return SolveResult(y, status, iterations, c, hessian)
     error0 = problem.error0
-    c, J = cons.evaluate(y)
+    c, J = cons.evaluate(y) if start_values is None else start_values
     rho = 1.0
     for iteration in range(1, max_iter + 1):
         if time.perf_counter() > deadline:

@@ -189,7 +189,8 @@ int nehmo_qp_check(nehmo_daqp_quadprog quadprog, void* settings, int n, int m, d
 /* Returns a status (enum above); y, B, c (m,), J (m, n) hold the final iterate. */
 int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, double tau, double eps,
                       int ngroups, nehmo_group* groups, int nlin, const double* A,
-                      const double* b, double* y, double* B, double* c, double* J, double tol,
+                      const double* b, double* y, double* B, double* c, double* J,
+                      int evaluated, double tol,
                       double feasibility_tol, int max_iter, double deadline,
                       nehmo_daqp_quadprog quadprog, void* settings, int* iterations,
                       int* qp_flag) {
@@ -201,7 +202,8 @@ int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, double ta
   *qp_flag = 0;
   *iterations = 0;
   if (n > NEHMO_MAX_N || m > NEHMO_MAX_M) return NEHMO_FAILED;
-  if (nehmo_evaluate(&prob, y, c, J)) return NEHMO_EVAL_ERROR;
+  /* evaluated: c and J already hold the rows' values and gradients at y */
+  if (!evaluated && nehmo_evaluate(&prob, y, c, J)) return NEHMO_EVAL_ERROR;
   for (int iteration = 1; iteration <= max_iter; ++iteration) {
     double step_size = 0.0, low, violation, merit, slope, alpha, merit_new;
     int flag;
