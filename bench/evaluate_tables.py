@@ -138,23 +138,30 @@ def _table_text(summary: dict[str, Any]) -> str:
             f"{', '.join(renamed)}: run before `nehmo` gained its self-clearance rows, with the "
             "same code as `nehmo_paper` now.\n"
         )
-    reruns: dict[tuple[str, ...], list[dict[str, Any]]] = {}
-    for r in summary.get("rerun", []):
-        reruns.setdefault(tuple(r["rows"]), []).append(r)
-    for rows, runs in reruns.items():
-        times = "once" if len(runs) == 1 else f"{len(runs)} times"
-        text += (
-            f"\nRows {', '.join(rows)} were run again afterwards on the same scenarios ({times}; "
-            f"the last run took {runs[-1]['wall_seconds']:.0f} s wall); the others are from the "
-            "first run.\n"
-        )
+    runs = summary.get("rerun", [])
+    if runs:
+        last: dict[str, int] = {}  # row -> the last rerun that produced it
+        for i, r in enumerate(runs):
+            for row in r["rows"]:
+                last[row] = i
+        parts = []
+        for i in sorted(set(last.values()), reverse=True):
+            rows = [r["row"] for r in summary["rows"] if last.get(r["row"]) == i]
+            parts.append(
+                f"{', '.join(rows)}: rerun {i + 1} of {len(runs)} "
+                f"({runs[i]['wall_seconds']:.0f} s wall)"
+            )
+        first = [r["row"] for r in summary["rows"] if r["row"] not in last]
+        if first:
+            parts.append(f"{', '.join(first)}: the first run")
+        text += "\nEvery run uses the same scenarios. Rows " + "; ".join(parts) + ".\n"
     return text
 
 
 def run_table(table: str, args: argparse.Namespace) -> list[dict[str, Any]]:
     summaries = []
     for setup_name, all_rows in TABLES[table]:
-        if args.setups and setup_name not in args.setups:
+        if args.report_only or (args.setups and setup_name not in args.setups):
             previous = args.out / f"table_{table}_{setup_name}.json"
             if previous.exists():  # keep it in the table's markdown and plot
                 summaries.append(json.loads(previous.read_text()))
@@ -220,6 +227,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--logs", type=Path, default=cache_dir() / "eval_logs")
+    parser.add_argument(
+        "--report-only",
+        action="store_true",
+        help="run nothing: write each table's markdown, JSON and plot again from the per-setup "
+        "results in --out",
+    )
     parser.add_argument("--no-render", action="store_true")
     parser.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
