@@ -35,6 +35,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from nehmo_core.errors import NehmoError
 from nehmo_core.eval.batch import BatchConfig, RowRun, run_rows
+from nehmo_core.eval.metrics import evaluate_log
 from nehmo_core.eval.paper import TABLES, paper_row
 from nehmo_core.eval.planners import parse_value_models, snapshot_value_models
 from nehmo_core.eval.render import render_episode
@@ -57,7 +58,6 @@ def _bars(table: str, summaries: list[dict[str, Any]], path: Path) -> None:
     for ax, summary in zip(axes[0], summaries, strict=True):
         rows = summary["rows"]
         x = np.arange(len(rows))
-        w = 0.2
 
         def value(row: dict[str, Any], key: str, ours: bool) -> float:
             src = row["ours"] if ours else (row["paper"] or {})
@@ -67,12 +67,14 @@ def _bars(table: str, summaries: list[dict[str, Any]], path: Path) -> None:
         series = [
             ("SR ours", "sr", True, "#2a7ab9", None),
             ("SR paper", "sr", False, "#9cc3e4", "//"),
-            ("CR ours", "cr", True, "#c0392b", None),
+            ("CR ours (between arms)", "cr_inter_arm", True, "#c0392b", None),
             ("CR paper", "cr", False, "#eba59d", "//"),
+            ("self-collision ours", "self_collision_rate", True, "#7f8c8d", None),
         ]
+        w = 0.16
         for k, (label, key, ours, colour, hatch) in enumerate(series):
             ax.bar(
-                x + (k - 1.5) * w,
+                x + (k - 2) * w,
                 [value(r, key, ours) for r in rows],
                 w,
                 label=label,
@@ -86,7 +88,7 @@ def _bars(table: str, summaries: list[dict[str, Any]], path: Path) -> None:
         ax.set_ylabel("%")
         n = rows[0]["ours"]["episodes"] if rows else 0
         ax.set_title(f"Table {table}: {summary['setup']} ({n} episodes)", fontsize=9)
-        ax.legend(fontsize=7, ncol=4, loc="upper center")
+        ax.legend(fontsize=6, ncol=3, loc="upper center")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -127,6 +129,26 @@ def _merge(previous: Path, summary: dict[str, Any], order: tuple[str, ...]) -> d
     rerun.update({k: summary[k] for k in ("load_average_at_start", "wall_seconds", "workers")})
     merged["rerun"] = [*old.get("rerun", []), rerun]
     return merged
+
+
+def _with_collision_kinds(summary: dict[str, Any]) -> dict[str, Any]:
+    """Rows from before self-collisions were counted apart get the split from their episode
+    logs (where those logs are still on disk; otherwise the row keeps its total CR only)."""
+    for row in summary["rows"]:
+        ours = row["ours"]
+        if "self_collisions" in ours:
+            continue
+        hit = [e for e in row["episodes"] if e["outcome"] == "collision"]
+        if not all(Path(e["log"]).exists() for e in hit):
+            continue
+        for e in hit:
+            e["collision"] = evaluate_log(e["log"]).collision_kind
+        own = sum(e["collision"] == "self" for e in hit)
+        n = ours["episodes"]
+        ours["self_collisions"] = own
+        ours["cr_inter_arm"] = 100.0 * (ours["collisions"] - own) / n if n else None
+        ours["self_collision_rate"] = 100.0 * own / n if n else None
+    return summary
 
 
 def _table_text(summary: dict[str, Any]) -> str:
@@ -246,7 +268,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         for table in tables:
-            summaries = run_table(table, args)
+            summaries = []
+            for summary in run_table(table, args):
+                if not all("self_collisions" in r["ours"] for r in summary["rows"]):
+                    summary = _with_collision_kinds(summary)
+                    write_summary(args.out, summary, stem=f"table_{table}_{summary['setup']}")
+                summaries.append(summary)
             text = f"## Table {table}\n\n" + "\n".join(_table_text(s) for s in summaries)
             (args.out / f"table_{table}.md").write_text(text)
             (args.out / f"table_{table}.json").write_text(

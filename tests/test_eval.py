@@ -13,11 +13,12 @@ import pytest
 from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.episode_log import read_episode_log
-from nehmo_core.eval.metrics import aggregate, evaluate_log
+from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log
 from nehmo_core.eval.planners import parse_value_models
+from nehmo_core.eval.report import markdown_table
 from nehmo_core.eval.scenario_sets import naive_collides, scenario_set_for
 from nehmo_core.eval.setups import get_setup, parse_row
-from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.geometry.pybullet_world import CellWorld, Collision
 from nehmo_core.hjr.networks import NetworkSettings
 from nehmo_core.planning.baselines import NaivePlanner
 from nehmo_core.planning.interface import PlanResult, Telemetry
@@ -92,6 +93,43 @@ def test_stops_at_the_first_colliding_tick(tmp_path: Path) -> None:
     with CellWorld(DUAL) as world:  # the tick before was free: the runner did not stop late
         world.set_configuration({a: log.positions[a][-2] for a in DUAL.arm_ids})
         assert not world.in_collision()
+
+
+def test_collision_rate_splits_inter_arm_from_self_collisions() -> None:
+    """The paper's CR counts collisions between arms; an episode that ends with an arm in
+    itself is counted apart (and in the total, as the authors' code does)."""
+
+    def episode(outcome: str, *hits: tuple[str, str]) -> EpisodeResult:
+        collisions = tuple(Collision(a, "wrist_3_link", b, "base_link", -1e-3) for a, b in hits)
+        return EpisodeResult(
+            outcome,
+            10**9,
+            25,
+            {"ur5_0": 1.0},
+            {"ur5_0": "naive"},
+            ("ur5_0",),
+            {"ur5_0": (1e-4,)},
+            {"ur5_0": {}},
+            {"ur5_0": 0},
+            collisions,
+            {"ur5_0": 0.0},
+        )
+
+    results = [
+        episode("success"),
+        episode("collision", ("ur5_0", "ur5_1")),
+        episode("collision", ("ur5_0", "ur5_0")),
+        episode("collision", ("ur5_1", "ur5_1"), ("ur5_0", "ur5_1")),  # both kinds: between arms
+    ]
+    assert [r.collision_kind for r in results] == [None, "inter-arm", "self", "inter-arm"]
+    m = aggregate(results)
+    assert (m.collisions, m.self_collisions) == (3, 1)
+    assert (m.cr, m.cr_inter_arm, m.self_collision_rate) == (75.0, 50.0, 25.0)
+    summary = {
+        "setup": "dual_ur5",
+        "rows": [{"row": "naive", "ours": m.to_dict(), "paper": None, "log_check": "ok"}],
+    }
+    assert "| naive | 4 | 25 (–) | 50 (–) | 25 | 0 |" in markdown_table(summary)
 
 
 def test_stops_at_the_time_limit() -> None:

@@ -7,11 +7,14 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pybullet as pb
 import pytest
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError, UnknownNameError
+from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.robots import ROBOT_NAMES, cell_names, load_cell, load_robot
 from nehmo_core.robots.loader import cell_from_dict, robot_from_urdf
+from nehmo_core.robots.model import ArmSpec, Cell, Pose
 
 
 def test_ur5_model_from_example_robot_data() -> None:
@@ -33,6 +36,36 @@ def test_kinova_model_limits() -> None:
     assert kin.continuous.tolist() == [True, False, False, True, False, True]
     np.testing.assert_allclose(kin.upper[[1, 2, 4]], [2.41, 2.66, 2.23])
     np.testing.assert_allclose(kin.lower[[1, 2, 4]], [-2.41, -2.66, -2.23])
+
+
+@pytest.mark.parametrize(
+    ("pair", "joint"),
+    [(("base_link", "bicep_link"), 1), (("forearm_link", "spherical_wrist_2_link"), 4)],
+)
+def test_kinova_pairs_touching_only_at_a_joint_limit_are_not_checked(pair, joint) -> None:
+    """The primitives of these pairs touch only with the joint at (within 0.03 rad of) its
+    limit, where the real links clear: the SRDF disables them, every other pair stays on."""
+    kin = load_robot("kinova_gen3_6dof")
+    assert frozenset(pair) not in {frozenset(p) for p in kin.self_collision_pairs()}
+    assert len(kin.self_collision_pairs()) == 13  # 21 non-adjacent pairs minus these two
+    world = CellWorld(Cell("one", (ArmSpec("k", kin, Pose()),)))
+    rng = np.random.default_rng(0)
+    lo, hi = np.maximum(kin.lower, -np.pi), np.minimum(kin.upper, np.pi)
+    touching = []
+    try:
+        for _ in range(400):
+            q = rng.uniform(lo, hi)
+            q[joint] = rng.uniform(0.9, 1.0) * (hi[joint] if rng.random() < 0.5 else lo[joint])
+            world.set_joint_positions("k", q)
+            a, b = (world.link_index("k", name) for name in pair)
+            body = world.body("k")
+            pts = pb.getClosestPoints(body, body, 0.0, a, b, physicsClientId=world.client)
+            if pts and min(p[8] for p in pts) <= 0.0:
+                touching.append(abs(q[joint]))
+    finally:
+        world.close()
+    assert touching  # the shapes do meet near the limit ...
+    assert min(touching) > hi[joint] - 0.03  # ... and only there
 
 
 def test_planar_two_link() -> None:

@@ -70,6 +70,14 @@ class EpisodeResult:
         """Joint-space path length of the cell [rad] (sum over arms)."""
         return float(sum(self.path_lengths.values()))
 
+    @property
+    def collision_kind(self) -> str | None:
+        """``"inter-arm"`` when the episode ended in a collision between two arms, ``"self"``
+        when only an arm against itself, ``None`` without a collision."""
+        if self.outcome != "collision":
+            return None
+        return "inter-arm" if any(c.arm_a != c.arm_b for c in self.collisions) else "self"
+
     def plan_time_samples(self) -> list[float]:
         """The planning times [s] this episode contributes to its row's mean ± std."""
         arms = [a for a in self.timed_arms if self.kinds[a] in OPT_KINDS] or list(self.timed_arms)
@@ -179,6 +187,7 @@ class RowMetrics:
     mpl: tuple[float, float]  # [rad] mean, std over successes (nan without successes)
     fail_safe_rate: float  # fail-safe commands / commands of the timed Opt arms
     statuses: dict[str, int]
+    self_collisions: int = 0  # the collisions of an arm with itself only (in ``collisions``)
 
     @property
     def sr(self) -> float:
@@ -186,7 +195,19 @@ class RowMetrics:
 
     @property
     def cr(self) -> float:
+        """Episodes ending in any collision [%] (the authors' code counts self-collisions)."""
         return 100.0 * self.collisions / self.episodes if self.episodes else math.nan
+
+    @property
+    def cr_inter_arm(self) -> float:
+        """Episodes ending in a collision between arms [%]: the paper's CR."""
+        inter = self.collisions - self.self_collisions
+        return 100.0 * inter / self.episodes if self.episodes else math.nan
+
+    @property
+    def self_collision_rate(self) -> float:
+        """Episodes ending in an arm's collision with itself only [%]."""
+        return 100.0 * self.self_collisions / self.episodes if self.episodes else math.nan
 
     @property
     def stuck_rate(self) -> float:
@@ -200,6 +221,9 @@ class RowMetrics:
             "stuck": self.stuck,
             "sr": self.sr,
             "cr": self.cr,
+            "self_collisions": self.self_collisions,
+            "cr_inter_arm": self.cr_inter_arm,
+            "self_collision_rate": self.self_collision_rate,
             "stuck_rate": self.stuck_rate,
             "plan_time_ms": {"mean": self.plan_time_ms[0], "std": self.plan_time_ms[1]},
             "plan_time_samples": self.plan_time_samples,
@@ -217,7 +241,8 @@ def _mean_std(x: Sequence[float]) -> tuple[float, float]:
 
 
 def aggregate(results: Sequence[EpisodeResult]) -> RowMetrics:
-    """SR, CR, stuck, planning time, MPL and fail-safe rate over ``results``."""
+    """SR, CR (all collisions, and self-collisions apart), stuck, planning time, MPL and
+    fail-safe rate over ``results``."""
     counts = Counter(r.outcome for r in results)
     times = [t * 1e3 for r in results for t in r.plan_time_samples()]
     mpl = [r.path_length for r in results if r.outcome == "success"]
@@ -239,4 +264,5 @@ def aggregate(results: Sequence[EpisodeResult]) -> RowMetrics:
         mpl=_mean_std(mpl),
         fail_safe_rate=fail / calls if calls else math.nan,
         statuses=dict(statuses),
+        self_collisions=sum(r.collision_kind == "self" for r in results),
     )

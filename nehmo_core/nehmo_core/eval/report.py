@@ -52,6 +52,7 @@ def row_summary(setup: str, run: RowRun) -> dict[str, Any]:
             {
                 "scenario": r.metadata.get("scenario_set", {}).get("index"),
                 "outcome": r.outcome,
+                "collision": r.collision_kind,
                 "end_time": r.end_time,
                 "path_length": r.path_length,
                 "log": str(path),
@@ -92,23 +93,32 @@ def markdown_table(summary: Mapping[str, Any]) -> str:
     lines = [
         f"### {summary['setup']}",
         "",
-        "| planners | episodes | SR % (paper) | CR % (paper) | stuck % | time ms (paper) "
-        "| MPL rad (paper) | fail-safe | log check |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| planners | episodes | SR % (paper) | CR % (paper) | self % | stuck % "
+        "| time ms (paper) | MPL rad (paper) | fail-safe | log check |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in summary["rows"]:
         ours, paper = row["ours"], row["paper"] or {}
         sr = f"{_pct(ours['sr'])} ({_pct(paper.get('sr'))})"
-        cr = f"{_pct(ours['cr'])} ({_pct(paper.get('cr'))})"
+        # the paper's CR counts collisions between arms; self-collisions have their own column
+        cr = f"{_pct(ours.get('cr_inter_arm', ours['cr']))} ({_pct(paper.get('cr'))})"
+        own = _pct(ours.get("self_collision_rate"))
         digits = 0 if (ours["plan_time_ms"]["mean"] or 0) >= 100 else 1
         time_ms = f"{_pm(ours['plan_time_ms'], digits)} ({_pm(paper.get('time_ms'), digits)})"
         mpl = f"{_pm(ours['mpl'])} ({_pm(paper.get('mpl'))})"
         fs = ours["fail_safe_rate"]
         lines.append(
-            f"| {row['row']} | {ours['episodes']} | {sr} | {cr} | {_pct(ours['stuck_rate'])} "
+            f"| {row['row']} | {ours['episodes']} | {sr} | {cr} | {own} "
+            f"| {_pct(ours['stuck_rate'])} "
             f"| {time_ms} | {mpl} | {'–' if fs is None else f'{100 * fs:.0f}%'} "
             f"| {row['log_check']} |"
         )
+    lines += [
+        "",
+        "CR: episodes ending in a collision between arms (the paper's definition); self: episodes "
+        "ending in an arm's collision with itself (the authors' code counts these as collisions "
+        "too). Either ends the episode.",
+    ]
     notes = [r["paper"]["note"] for r in summary["rows"] if r["paper"] and r["paper"]["note"]]
     if notes:
         lines += ["", *(f"Paper: {n}." for n in notes)]
