@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import signal
@@ -295,7 +296,9 @@ def analyse(
         elif isinstance(rec.message, DiagnosticStatus):
             values = {kv.key: kv.value for kv in rec.message.values}
             publish[arm].append(int(values["publish_wall_ns"]))
-            solve[arm].append(float(values["solve_time"]))
+            solve_time = float(values["solve_time"])
+            if math.isfinite(solve_time):  # NaN: a missed deadline, no solve finished in time
+                solve[arm].append(solve_time)
             ticks[arm].append(int(values["ticks"]))
             last[arm] = values
     bridge = stop_counts(outputs.get("bridge", ""), "sim_bridge:")

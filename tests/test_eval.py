@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -13,7 +14,7 @@ import pytest
 from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.episode_log import read_episode_log
-from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log
+from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log, planning_times
 from nehmo_core.eval.planners import parse_value_models
 from nehmo_core.eval.report import markdown_table
 from nehmo_core.eval.scenario_sets import naive_collides, scenario_set_for
@@ -130,6 +131,21 @@ def test_collision_rate_splits_inter_arm_from_self_collisions() -> None:
         "rows": [{"row": "naive", "ours": m.to_dict(), "paper": None, "log_check": "ok"}],
     }
     assert "| naive | 4 | 25 (–) | 50 (–) | 25 | 0 |" in markdown_table(summary)
+
+
+def test_planning_time_leaves_out_holds_and_missed_deadlines() -> None:
+    """A node's hold (no planning ran) and a missed deadline (NaN: no solve finished) are not
+    planning times; every status where plan() ran is, the fail-safe ones included."""
+    records = [
+        Telemetry(0.002, "optimal"),
+        Telemetry(0.001, "naive"),
+        Telemetry(0.003, "infeasible", fail_safe=True),
+        Telemetry(math.nan, "deadline_missed", fail_safe=True),
+        Telemetry(2e-6, "stale_peer"),
+        Telemetry(1e-6, "waiting_for_peers"),
+        Telemetry(0.004, "failed", fail_safe=True),
+    ]
+    assert planning_times(records) == (0.002, 0.001, 0.003, 0.004)
 
 
 def test_stops_at_the_time_limit() -> None:

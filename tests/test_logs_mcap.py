@@ -211,6 +211,21 @@ def test_sigkill_writer_then_recover(tmp_path: Path) -> None:
     assert positions == pytest.approx([0.001 * i for i in range(len(states))])
 
 
+def test_pending_counts_the_messages_a_kill_would_lose(tmp_path: Path) -> None:
+    path = tmp_path / "pending.mcap"
+    with LogWriter(path, WriterSettings(flush_every=50, flush_interval_s=60.0)) as log:
+        assert log.pending == 0
+        for k in range(3):
+            log.write(command_topic("ur5_0"), Float64MultiArray(data=[0.1 * k]), k)
+        assert log.pending == 3  # still in memory: a SIGKILL now would lose them
+        log.flush()
+        assert log.pending == 0
+        assert recover(path, tmp_path / "after.mcap").messages == 3  # on disk now
+        for k in range(50):  # flush_every flushes by itself
+            log.write(command_topic("ur5_0"), Float64MultiArray(data=[0.0]), k)
+        assert log.pending == 0
+
+
 def test_writer_settings_are_checked() -> None:
     with pytest.raises(ValueError, match="flush_every"):
         WriterSettings(flush_every=0)

@@ -24,6 +24,11 @@ CASES = [
     ("nehmo_ros.arm_planner", ["cell:=dual_ur5", "arm_id:=ur5_0", "rate:=25"], "`rate`"),
     ("sim_bridge.bridge", ["cell:=dual_ur5", "physics_rate:=-5.0"], "`physics_rate` must be"),
     ("sim_bridge.bridge", ["cell:=no_such_cell"], "unknown cell 'no_such_cell'"),
+    (
+        "sim_bridge.bridge",
+        ["cell:=dual_ur5", "real_time_factor:=2.0"],
+        "`real_time_factor` must be 1 without sim_time",
+    ),
     ("nehmo_ros.recorder", ["cell:=dual_ur5", "output:=run.txt"], "`output` must be a path"),
 ]
 
@@ -31,7 +36,17 @@ CASES = [
 @pytest.mark.parametrize(
     ("module", "params", "expected"),
     CASES,
-    ids=["no_arm_id", "unknown_arm", "epsilon", "planner", "rate_type", "bridge", "cell", "out"],
+    ids=[
+        "no_arm_id",
+        "unknown_arm",
+        "epsilon",
+        "planner",
+        "rate_type",
+        "bridge",
+        "cell",
+        "rtf",
+        "out",
+    ],
 )
 def test_invalid_parameter_stops_the_node_with_one_line(
     module: str, params: list[str], expected: str
@@ -44,4 +59,29 @@ def test_invalid_parameter_stops_the_node_with_one_line(
     lines = [line for line in proc.stderr.splitlines() if "pybullet build time" not in line]
     assert len(lines) == 1, proc.stderr
     assert expected in lines[0], lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "env", "expected"),
+    [
+        (["-p", "cell"], {}, "-p expects NAME:=VALUE; got 'cell'"),
+        (["-p"], {}, "-p needs an argument"),
+        (["-p", "cell:=dual_ur5"], {"ROS_DOMAIN_ID": "999"}, "ROS_DOMAIN_ID must be an integer"),
+    ],
+    ids=["no_value", "no_rule", "domain_id"],
+)
+@pytest.mark.parametrize(
+    ("module", "program"), [("nehmo_ros.recorder", "recorder"), ("sim_bridge.bridge", "sim_bridge")]
+)
+def test_bad_ros_arguments_stop_the_node_with_one_line(
+    module: str, program: str, args: list[str], env: dict[str, str], expected: str
+) -> None:
+    """Errors of ``ros.init`` (the ``--ros-args`` section, the DDS domain) too."""
+    argv = [sys.executable, "-m", module, "--ros-args", *args]
+    proc = subprocess.run(argv, env=child_env(**env), capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if "pybullet build time" not in line]
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"{program}: error: ") and expected in lines[0], lines[0]
     assert "Traceback" not in proc.stderr

@@ -30,7 +30,9 @@ no pair model covers: they are then not constrained; default false: an error),
 Faults are reported, never fatal: rejected or jumping joint states, stale peers, solver
 exceptions and missed deadlines each log a WARN line (at most one per cause every 2 s) and
 show in every status (level WARN for a fail-safe or hold, ERROR for a solver exception or no
-own state) with running counters.
+own state) with running counters. A missed deadline's status has ``solve_time`` NaN; the
+abandoned solve's own time comes as ``late_solve_time`` [s] (its tick: ``late_solve_tick``) in
+the first status after it finished, NaN (-1) in every other status.
 """
 
 from __future__ import annotations
@@ -305,6 +307,8 @@ class ArmPlannerNode:
             "period": repr(period),
             "publish_wall_ns": wall_ns,
             "command": ",".join(repr(float(u)) for u in d.velocity),
+            "late_solve_time": repr(float(d.late_solve_time)),
+            "late_solve_tick": d.late_tick,
         }
         if self.fault:
             extra["fault_injection"] = self.fault

@@ -20,6 +20,11 @@ Rules, in order of precedence, for the command of a tick:
 5. the solver failed, was infeasible or late inside ``plan`` → the planner's fail-safe;
 6. otherwise the planner's command.
 
+Every command, the fail-safe of rule 2 included, is clipped to ±``u_max``; one with a value that
+is not finite becomes a hold. A missed deadline reports no solve time (NaN: no solve finished in
+time); the abandoned solve's own time comes with the first command after it finished
+(``Decision.late_solve_time``).
+
 Joint states that are NaN/inf, of the wrong length or with unknown joint names are rejected
 (counted and reported) and leave the previous valid state in place, so a peer sending only
 garbage turns stale. A valid state that moved further than the arm can move since its previous
@@ -232,12 +237,18 @@ class Decision:
     hold: bool = False
     tick: int = -1  # the observation tick it was computed from
     observation_ns: int = 0  # ROS time [ns] of that observation
-    solve_time: float = 0.0  # [s] plan() time when the planner ran, else the worker's job time
+    #: [s] plan() time when the planner ran, else the worker's job time; NaN when no solve
+    #: finished in time (``deadline_missed``)
+    solve_time: float = 0.0
     telemetry: Telemetry | None = None  # the planner's own report, when it ran
     stale: tuple[str, ...] = ()
     missing: tuple[str, ...] = ()
     untrusted: tuple[str, ...] = ()
     error: str = ""
+    #: [s] solve time of an abandoned (late) solve that finished since the previous command,
+    #: and the tick it solved; NaN and -1 when there is none
+    late_solve_time: float = math.nan
+    late_tick: int = -1
 
     @property
     def planned(self) -> bool:
@@ -351,9 +362,11 @@ class ArmController:
         self._goal_lock = threading.Lock()
         self._tick = 0
         self.last_observation: Observation | None = None
-        self._submitted: tuple[int, int, float] | None = None  # tick, stamp, monotonic time
+        self._submitted: Observation | None = None  # the job whose result is due next tick
+        self._abandoned: int | None = None  # tick of a late job whose solve time is not out yet
         self._fallback_lock = threading.Lock()
         self._fallback: tuple[int, np.ndarray] | None = None  # (tick, fail-safe) of the latest job
+        self._finished: dict[int, float] = {}  # tick → solve time of jobs finished lately
         self._worker = SolveWorker(self._solve, name=f"solve_{arm_id}")
 
     def telemetry(self, decision: Decision) -> Telemetry:
@@ -416,39 +429,65 @@ class ArmController:
 
         ``now`` [s] is monotonic time (staleness), ``stamp_ns`` the ROS time of the tick.
         """
-        decision = self._collect(now, stamp_ns)
+        obs = self.observe(now, stamp_ns)
+        decision = self._collect(obs)
         self._count(decision)
-        obs = self.last_observation = self.observe(now, stamp_ns)
+        self.last_observation = obs
         if self._worker.submit(obs):
-            self._submitted = (obs.tick, obs.stamp_ns, now)
+            self._submitted = obs
         self._tick += 1
         return decision
 
-    def _collect(self, now: float, stamp_ns: int) -> Decision:
+    def _collect(self, current: Observation) -> Decision:
+        """The command due at this tick (``current`` is this tick's observation)."""
         dof = self.robot.dof
-        result = self._worker.take()  # a late result of an abandoned job is dropped here
+        with self._fallback_lock:  # before the take: a job finishing in between is seen next time
+            finished, self._finished = self._finished, {}
+        late_tick, late_time = -1, math.nan
+        if self._abandoned is not None and self._abandoned in finished:
+            late_tick, self._abandoned = self._abandoned, None
+            late_time = finished[late_tick]
+        result = self._worker.take()  # a late result is dropped (its solve time is reported)
         expected, self._submitted = self._submitted, None
-        if expected is not None and result is not None and result.tick == expected[0]:
-            return result
+        if expected is not None and result is not None and result.tick == expected.tick:
+            return replace(result, late_solve_time=late_time, late_tick=late_tick)
         if expected is None and self._tick == 0:
             return Decision(_zeros(dof), "starting", hold=True)
         # The solve due now has not finished (or none could start: the worker was still busy).
         self.counters.deadline_misses += 1
+        if expected is not None:
+            self._abandoned = expected.tick
+        source = expected or current
         late = Decision(
             _zeros(dof),
             "deadline_missed",
             fail_safe=True,
             hold=True,
-            tick=expected[0] if expected else self._tick,
-            observation_ns=expected[1] if expected else stamp_ns,
-            solve_time=now - expected[2] if expected else 0.0,
+            tick=source.tick,
+            observation_ns=source.stamp_ns,
+            solve_time=math.nan,  # no solve finished in time
+            stale=source.stale,
+            missing=source.missing,
+            untrusted=source.untrusted,
+            late_solve_time=late_time,
+            late_tick=late_tick,
         )
         with self._fallback_lock:
             fallback = self._fallback
         max_age = self.settings.peer_timeout / self.settings.period  # [ticks]
-        if fallback is not None and self._tick - fallback[0] <= max_age:
-            return replace(late, velocity=fallback[1], hold=False)
-        return late
+        if fallback is None or self._tick - fallback[0] > max_age:
+            return late
+        velocity = self._guard(fallback[1])
+        if velocity is None:
+            return replace(late, error="the fail-safe command is not finite")
+        return replace(late, velocity=velocity, hold=False)
+
+    def _guard(self, velocity: np.ndarray) -> np.ndarray | None:
+        """``velocity`` [rad/s] clipped to ±u_max, or None when some value is not finite."""
+        velocity = np.asarray(velocity, dtype=np.float64)
+        if not np.all(np.isfinite(velocity)):
+            return None
+        return np.clip(velocity, -self.settings.u_max, self.settings.u_max)
 
     def _count(self, decision: Decision) -> None:
         c = self.counters
@@ -474,17 +513,20 @@ class ArmController:
             decision = self._decide(obs)
         except Exception as exc:  # a planner crash must never reach the tick thread
             decision = self._failure(obs, exc)
-        velocity = np.clip(decision.velocity, -self.settings.u_max, self.settings.u_max)
-        if not np.all(np.isfinite(velocity)):
+        velocity = self._guard(decision.velocity)
+        if velocity is None:
             velocity = _zeros(self.robot.dof)
             decision = replace(decision, status="non_finite_command", hold=True, fail_safe=True)
         job_time = time.perf_counter() - start
+        solve_time = decision.telemetry.solve_time if decision.telemetry else job_time
+        with self._fallback_lock:
+            self._finished[obs.tick] = solve_time
         return replace(
             decision,
             velocity=velocity,
             tick=obs.tick,
             observation_ns=obs.stamp_ns,
-            solve_time=decision.telemetry.solve_time if decision.telemetry else job_time,
+            solve_time=solve_time,
             stale=obs.stale,
             missing=obs.missing,
             untrusted=obs.untrusted,

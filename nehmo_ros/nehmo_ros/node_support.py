@@ -1,10 +1,11 @@
 """What the NeHMO nodes share: parameter reading, one-line start-up errors, a clean stop.
 
-Every node's ``main()`` goes through :func:`run_main`: bad parameters (or a bad cell file,
-model, scenario ...) print ``<node>: error: <one line naming the parameter, rule and value>``
-and exit with status 2; SIGINT/SIGTERM stop the spin loop and call the node's ``on_stop``
-while the middleware is still up (so a last command or the log's summary still goes out),
-then the node is destroyed and the context shut down.
+Every node's ``main()`` goes through :func:`run_main`: bad parameters, a malformed
+``--ros-args`` section, a bad ``ROS_DOMAIN_ID`` (or a bad cell file, model, scenario ...) print
+``<node>: error: <one line naming the parameter, rule and value>`` and exit with status 2;
+SIGINT/SIGTERM stop the spin loop and call the node's ``on_stop`` while the middleware is still
+up (so a last command or the log's summary still goes out), then the node is destroyed and the
+context shut down.
 """
 
 from __future__ import annotations
@@ -86,9 +87,9 @@ def run_main(
     After the stop request the node spins ``drain_s`` more seconds (taking what is queued),
     then ``on_stop`` runs while the middleware is still up.
     """
-    ros.init(args=None if argv is None else [program, *argv])
     try:
         try:
+            ros.init(args=None if argv is None else [program, *argv])  # --ros-args, domain id
             wrapper = build()
         except NODE_ERRORS as err:
             print(f"{program}: error: {one_line(err)}", file=sys.stderr, flush=True)

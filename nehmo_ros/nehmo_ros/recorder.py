@@ -14,13 +14,14 @@ node clock (simulated time under ``use_sim_time``), so the joint states of all a
 at one simulator step share one log time; ``stamp_source:=receive`` logs everything at its
 receive time, as ``ros2 bag record`` does.
 
-Durability: the log is flushed every ``flush_every`` messages or ``flush_interval`` s. On
-SIGINT/SIGTERM the node takes what is still queued, then writes the summary: nothing received
-is lost. After SIGKILL the file lacks its summary; repair it with
+Durability: the log is flushed every ``flush_every`` messages and, by a timer on the monotonic
+clock (it runs when traffic and simulated time stop), every ``flush_interval`` s while messages
+are unflushed. On SIGINT/SIGTERM the node takes what is still queued, then writes the summary:
+nothing received is lost. After SIGKILL the file lacks its summary; repair it with
 ``python -m nehmo_core.logs.recover broken.mcap fixed.mcap`` (loses at most the last flush
-interval). An existing ``output`` is never overwritten: the node records to
-``<stem>_1.mcap`` (``_2`` ...) instead and says so. A message that cannot be written (disk
-full, ...) is counted and reported, and recording goes on.
+interval). An existing ``output`` is never overwritten: the node records to ``<stem>_1.mcap``
+(``_2`` ...) instead and says so. A message that cannot be written (disk full, ...) is counted
+and reported, and recording goes on.
 """
 
 from __future__ import annotations
@@ -133,6 +134,11 @@ class RecorderNode:
                 raw=True,
             )
         self.count = 0
+        self.flush_timer = n.create_timer(
+            settings.flush_interval_s,
+            self._flush_pending,
+            clock=ros.Clock(clock_type=ros.ClockType.STEADY_TIME),
+        )
         n.get_logger().info(f"recording {len(self.topics)} topics to {path}")
 
     def _callback(self, topic: str, msgtype: str) -> Callable[[bytes], None]:
@@ -157,8 +163,21 @@ class RecorderNode:
             return
         self.count += 1
 
+    def _flush_pending(self) -> None:
+        """Flush what came since the last flush (traffic may have stopped since)."""
+        if not self.writer.pending:
+            return
+        try:
+            self.writer.flush()
+        except Exception as err:  # disk full, ...: report, keep recording
+            self.node.get_logger().error(
+                f"cannot flush {self.path} ({type(err).__name__}: {err})",
+                throttle_duration_sec=2.0,
+            )
+
     def on_stop(self) -> None:
         """Write the summary (the queued messages were taken by the final drain)."""
+        self.flush_timer.cancel()
         try:
             self.writer.close()
         except Exception as err:

@@ -13,15 +13,16 @@ self-collision exactly (pairs that provably do not touch skip the exact query:
   on every step that collides;
 - ``/clock`` (rosgraph_msgs/Clock) when ``sim_time`` is true: simulated time, 0 at the start of
   the episode, paced at ``real_time_factor`` × wall time. Other nodes then run with
-  ``use_sim_time:=true``. Without ``sim_time`` the stamps are wall time.
+  ``use_sim_time:=true``. Without ``sim_time`` the stamps are wall time and
+  ``real_time_factor`` must be 1.
 
-It subscribes to ``/<arm>/velocity_controller/commands`` (std_msgs/Float64MultiArray, one value
-per joint in the robot's joint order). Commands of the wrong length, not finite or beyond a
-joint's velocity limit (the URDF's) are dropped (ros2_control drops wrong lengths silently; here
-each is counted and logged). **Watchdog:** an arm whose latest command is older than
-``command_timeout`` holds still; each time that happens to an arm that was being commanded
-(its planner died, hung or lost the connection) a WARN line says so, and another when commands
-resume; the episode's end line counts the trips per arm.
+It subscribes to ``/<arm>/velocity_controller/commands`` (std_msgs/Float64MultiArray, one value per
+joint in the robot's joint order). Commands of the wrong length, not finite or beyond a joint's
+velocity limit (the URDF's) are dropped (ros2_control drops wrong lengths silently; here each is
+counted and logged). **Watchdog:** an arm whose latest command is older than ``command_timeout``
+(simulated time with ``sim_time``, else wall time) holds still; each time that happens to an arm
+that was being commanded (its planner died, hung or lost the connection) a WARN line says so, and
+another when commands resume; the episode's end line counts the trips per arm.
 
 **Scenario reset.** At start the cell is set to an episode's start configuration: episode
 ``episode`` of the scenario set file ``scenarios`` (nehmo_core.sim.scenarios JSON), or, without
@@ -129,6 +130,13 @@ class BridgeSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise InvalidValueError(name, "must be a finite number > 0", value)
+        if not self.sim_time and self.real_time_factor != 1.0:
+            raise InvalidValueError(
+                "real_time_factor",
+                "must be 1 without sim_time (the stamps are wall time; set sim_time:=true to run "
+                "faster or slower than real time)",
+                self.real_time_factor,
+            )
         if self.physics_rate > 2000:
             raise InvalidValueError("physics_rate", "must be <= 2000 Hz", self.physics_rate)
         for name in ("time_limit", "success_tolerance", "start_timeout"):
@@ -223,6 +231,7 @@ class SimBridgeNode:
         self.clock_pub = (
             n.create_publisher(ros.msg.Clock, CLOCK_TOPIC, HISTORY) if self.s.sim_time else None
         )
+        #: Each arm's latest command and when it came (seconds of ``_now``).
         self.commands: dict[str, tuple[np.ndarray, float]] = {}
         self.commanded: set[str] = set()
         self.dropped: dict[str, int] = dict.fromkeys(self.cell.arm_ids, 0)
@@ -317,6 +326,12 @@ class SimBridgeNode:
             pub.publish(self._joint_state(a, self.sim.q[a], velocities[a], t_ns))
         self.published["joint_states_per_arm"] += 1
 
+    def _now(self) -> float:
+        """The watchdog's clock [s]: simulated time with ``sim_time``, else monotonic time."""
+        if self.s.sim_time:
+            return self.t_ns / 1e9
+        return time.monotonic()
+
     # -- callbacks ----------------------------------------------------------------------------
     def _command_callback(self, arm_id: str) -> Callable[[Any], None]:
         return lambda msg: self._on_command(arm_id, msg)
@@ -341,12 +356,12 @@ class SimBridgeNode:
                 throttle_duration_sec=2.0,
             )
             return
-        self.commands[arm_id] = (data, time.monotonic())
+        self.commands[arm_id] = (data, self._now())
         self.commanded.add(arm_id)
 
     def _applied(self) -> dict[str, np.ndarray]:
         """Each arm's velocity for this step: its latest command, or zero (watchdog, done)."""
-        now = time.monotonic()
+        now = self._now()
         out = {}
         for arm in self.cell.arms:
             latest = self.commands.get(arm.arm_id)

@@ -28,6 +28,7 @@ import numpy as np
 from nehmo_core.eval.episode_log import EpisodeLog, EpisodeLogError, read_episode_log
 from nehmo_core.eval.setups import OPT_KINDS, is_centralized
 from nehmo_core.geometry.pybullet_world import Collision
+from nehmo_core.planning.interface import Telemetry
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import goal_error
 
@@ -39,7 +40,23 @@ __all__ = [
     "evaluate_log",
     "goal_distance",
     "path_lengths",
+    "planning_times",
 ]
+
+NOT_PLANNED = frozenset(
+    {
+        "deadline_missed",
+        "stale_peer",
+        "untrusted_peer",
+        "no_own_state",
+        "own_state_untrusted",
+        "no_goal",
+        "waiting_for_peers",
+        "starting",
+    }
+)
+"""Statuses of a planner node's commands for which no planning ran (holds, and a missed
+deadline, whose solve time is NaN): their times are not planning times."""
 
 OUTCOMES = ("success", "collision", "stuck")
 
@@ -107,6 +124,15 @@ def goal_distance(q: np.ndarray, goal: np.ndarray, cell: Cell, arm_id: str, norm
     return float(np.abs(e).max()) if norm == "max" else float(np.linalg.norm(e))
 
 
+def planning_times(telemetry: Sequence[Telemetry]) -> tuple[float, ...]:
+    """The solve times [s] of the commands for which planning ran (see :data:`NOT_PLANNED`)."""
+    return tuple(
+        t.solve_time
+        for t in telemetry
+        if t.status not in NOT_PLANNED and math.isfinite(t.solve_time)
+    )
+
+
 def _first_success(log: EpisodeLog, norm: str, tolerance: float) -> int | None:
     for k in range(len(log.stamps)):
         if all(
@@ -153,7 +179,7 @@ def evaluate_log(path_or_log: str | Path | EpisodeLog) -> EpisodeResult:
     fail_safe: dict[str, int] = {}
     for a in log.cell.arm_ids:
         records = [r for _, r in log.statuses[a] if t0 <= r.observation_ns < end_ns]
-        plan_times[a] = tuple(r.telemetry.solve_time for r in records)
+        plan_times[a] = planning_times([r.telemetry for r in records])
         statuses[a] = dict(Counter(r.telemetry.status for r in records))
         fail_safe[a] = sum(r.telemetry.fail_safe for r in records)
     return EpisodeResult(

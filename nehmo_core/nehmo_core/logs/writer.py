@@ -194,6 +194,15 @@ class LogWriter:
         self.write(SCENARIO_TOPIC, StringMsg(data=text), log_time_ns)
         self.flush()
 
+    @property
+    def pending(self) -> int:
+        """Messages written since the last flush (lost if the process is killed now).
+
+        ``write_raw`` checks ``flush_interval_s`` only when a message comes; a writer whose
+        traffic may stop calls :meth:`flush` from a timer while this is nonzero.
+        """
+        return self._unflushed
+
     def flush(self) -> None:
         """Close the open chunk and hand everything to the OS (survives SIGKILL, not power loss)."""
         self._check_open()
