@@ -224,7 +224,9 @@ def run_table(table: str, args: argparse.Namespace) -> list[dict[str, Any]]:
         if args.only_rows:
             summary = _merge(args.out / f"table_{table}_{setup_name}.json", summary, all_rows)
         write_summary(args.out, summary, stem=f"table_{table}_{setup_name}")
-        if not args.no_render:
+        # a setup's render shows an Opt row; a rerun of other rows only keeps the one there is
+        has_opt = any(k in OPT_KINDS for r in runs for k in r.kinds.values())
+        if not args.no_render and (has_opt or not args.only_rows):
             for p in _render(setup_name, runs, args.out):
                 print(f"rendered {p}", file=sys.stderr)
         summaries.append(summary)

@@ -46,7 +46,9 @@ from nehmo_core.robots.model import Cell, RobotModel, wrap_angle
 _HALF_PI = np.pi / 2
 SAMPLING_RANGES: dict[str, np.ndarray] = {
     # (dof, 2) [rad]: low, high per joint. Robots not listed sample within their joint limits
-    # (clipped to ±π), as the authors do for the Kinova Gen3.
+    # (clipped to ±π). For the Kinova Gen3 that is wider than the authors' box, which draws
+    # their limited joints 2 and 4 (7-DoF numbering) in ±2 rather than ±2.41 / ±2.66; the
+    # committed scenario sets were drawn this way.
     "ur5": np.array(
         [
             [-5.0, -1.5],  # wrapped to (−π, π] after the draw
