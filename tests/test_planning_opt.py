@@ -356,6 +356,18 @@ def test_c_and_python_loops_agree_from_the_naive_step_and_on_shared_constraints(
     assert solved >= 10
 
 
+def test_a_subset_of_the_constraints_is_made_once_per_choice_of_rows(model) -> None:
+    """A solve's restarts ask for the same screened rows again: they get the same object (with
+    what the C loop prepared on it), and its rows are those asked for."""
+    cons = _multi_peer_problems(model, 12, 1)[0].constraints
+    keep = np.array([True, False, True, False])
+    first = cons.subset(keep)
+    assert cons.subset(keep.copy()) is first
+    assert cons.subset(~keep) is not first
+    y = np.full(6, 0.01)
+    np.testing.assert_array_equal(first.evaluate(y)[0][:2], cons.evaluate(y)[0][[0, 2]])
+
+
 def _assert_same_solve(a: SolveResult, b: SolveResult) -> None:
     assert a.status == b.status
     assert a.iterations == b.iterations

@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import cast
 
 import numpy as np
 
@@ -42,7 +43,7 @@ class Constraints:
     linear: SelfClearanceRows | None = None  # self-clearance rows A·y ≥ b, after the V rows
 
     @cached_property
-    def scratch(self) -> dict[str, object]:
+    def scratch(self) -> dict[object, object]:
         """Per-instance memory for solvers (e.g. the C loop's prepared arguments)."""
         return {}
 
@@ -58,7 +59,16 @@ class Constraints:
 
     def subset(self, keep: np.ndarray) -> Constraints:
         """The same constraints with only the V rows where ``keep`` (value_count,) is true
-        (the linear rows stay)."""
+        (the linear rows stay). The same ``keep`` gives the same object (a solve's restarts
+        reuse what solvers keep on it, see :attr:`scratch`)."""
+        key = ("subset", np.asarray(keep, dtype=bool).tobytes())
+        if key in self.scratch:
+            return cast(Constraints, self.scratch[key])
+        made = self._subset(keep)
+        self.scratch[key] = made
+        return made
+
+    def _subset(self, keep: np.ndarray) -> Constraints:
         groups, start = [], 0
         for index, states in self.groups:
             mine = keep[start : start + len(states)]
