@@ -86,6 +86,24 @@ def test_command_of_tick_k_comes_from_the_observation_of_tick_k_minus_1() -> Non
         c.stop()
 
 
+def test_a_command_carries_the_state_ages_of_its_own_observation() -> None:
+    """The status reports the state ages the command was computed from (the previous tick's
+    observation), not those seen at the tick that publishes it."""
+    c = _controller(RecordingPlanner())
+    try:
+        _feed(c, 0.0, 0.0)
+        c.tick(0.01)  # observation of tick 0: states 10 ms old
+        _wait_idle(c)
+        c.states.update("ur5_0", NAMES, [0.0] * 6, 0.04)  # the peer's state is not renewed
+        command = c.tick(0.05)
+        assert command.status == "optimal" and command.tick == 0
+        assert command.ages == pytest.approx({"ur5_0": 0.01, "ur5_1": 0.01})
+        assert c.last_observation is not None
+        assert c.last_observation.ages == pytest.approx({"ur5_0": 0.01, "ur5_1": 0.05})
+    finally:
+        c.stop()
+
+
 def test_missed_deadline_publishes_the_fail_safe_of_the_previous_observation() -> None:
     c = _controller(RecordingPlanner(delay=0.1))
     try:

@@ -312,9 +312,8 @@ class ArmPlannerNode:
         }
         if self.fault:
             extra["fault_injection"] = self.fault
-        last = self.controller.last_observation
-        if last is not None:
-            extra.update({f"age_{a}": f"{age:.4f}" for a, age in last.ages.items()})
+        # the state ages of the observation this command was computed from
+        extra.update({f"age_{a}": f"{age:.4f}" for a, age in d.ages.items()})
         msg.level = _level(d)
         msg.values += [KeyValue(key=k, value=str(v)) for k, v in extra.items()]
         return msg

@@ -41,7 +41,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -244,6 +244,7 @@ class Decision:
     stale: tuple[str, ...] = ()
     missing: tuple[str, ...] = ()
     untrusted: tuple[str, ...] = ()
+    ages: Mapping[str, float] = field(default_factory=dict)  # [s] state ages at that observation
     error: str = ""
     #: [s] solve time of an abandoned (late) solve that finished since the previous command,
     #: and the tick it solved; NaN and -1 when there is none
@@ -469,6 +470,7 @@ class ArmController:
             stale=source.stale,
             missing=source.missing,
             untrusted=source.untrusted,
+            ages=source.ages,
             late_solve_time=late_time,
             late_tick=late_tick,
         )
@@ -530,6 +532,7 @@ class ArmController:
             stale=obs.stale,
             missing=obs.missing,
             untrusted=obs.untrusted,
+            ages=obs.ages,
         )
 
     def _hold(self, status: str) -> Decision:
