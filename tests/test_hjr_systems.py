@@ -165,3 +165,17 @@ def test_make_system_and_bad_parameters_raise() -> None:
         Air3D(horizon=0.0)
     with pytest.raises(InvalidValueError, match=r"shape \(B, 4\)"):
         TwoLinkPair().check_states(torch.zeros(3, 3))
+
+
+def test_segment_distance_of_collinear_and_touching_segments() -> None:
+    from nehmo_core.hjr.systems import segment_distance
+
+    def dist(a, b, c, d):  # type: ignore[no-untyped-def]
+        t = [torch.tensor([p], dtype=torch.float64) for p in (a, b, c, d)]
+        return float(segment_distance(*t)[0])
+
+    assert dist((0, 0), (1, 0), (2, 0), (3, 0)) == pytest.approx(1.0)  # collinear, apart
+    assert dist((0, 0), (2, 0), (1, 0), (3, 0)) == pytest.approx(0.0, abs=1e-8)  # overlapping
+    assert dist((0, 0), (1, 0), (1, 0), (1, 1)) == pytest.approx(0.0, abs=1e-8)  # touching ends
+    assert dist((0, -1), (0, 1), (-1, 0), (1, 0)) == 0.0  # crossing
+    assert dist((0, 0), (1, 0), (0.5, 0.5), (0.5, 2)) == pytest.approx(0.5)  # apart

@@ -493,9 +493,12 @@ def segment_distance(a: Tensor, b: Tensor, c: Tensor, d: Tensor) -> Tensor:
         ],
         dim=1,
     ).amin(dim=1)
+    # a proper crossing: each segment's ends strictly on both sides of the other's line. Touching
+    # (an end on the other segment) and collinear overlap show in the endpoint distances, so the
+    # zero cases stay out (two collinear segments apart would otherwise count as crossing).
     s1 = _cross(b - a, c - a) * _cross(b - a, d - a)
     s2 = _cross(d - c, a - c) * _cross(d - c, b - c)
-    crossing = (s1 <= 0.0) & (s2 <= 0.0)
+    crossing = (s1 < 0.0) & (s2 < 0.0)
     return torch.where(crossing, torch.zeros_like(endpoint), endpoint)
 
 
