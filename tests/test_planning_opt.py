@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import itertools
+import math
+import re
 import time
 from dataclasses import replace
 
@@ -12,7 +14,7 @@ import pytest
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.hjr.networks import NetworkSettings
 from nehmo_core.planning import native, sqp
-from nehmo_core.planning.baselines import NaivePlanner
+from nehmo_core.planning.baselines import NaivePlanner, TrajectoryTracker, retime
 from nehmo_core.planning.ipopt_solver import IpoptSolver
 from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver, make_solver
 from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
@@ -676,3 +678,127 @@ def test_unknown_choices_list_the_valid_ones(model) -> None:
         NehmoPlanner(CELL, OWN, [model]).plan(np.zeros(5), {PEER: np.zeros(6)}, np.zeros(6))
     with pytest.raises(InvalidValueError, match="`peers`"):
         NehmoPlanner(CELL, OWN, [model]).plan(np.zeros(6), {}, np.zeros(6))
+
+
+class _Switchable:
+    """The SQP solver until ``fail`` is set, then a failing one."""
+
+    def __init__(self) -> None:
+        self.fail = False
+
+    def __call__(
+        self, problem: OptProblem, y_start: np.ndarray, deadline: float, hessian=None
+    ) -> SolveResult:
+        if self.fail:
+            return SolveResult(np.zeros(6), "failed", 1, np.zeros(1))
+        return SqpSolver()(problem, y_start, np.inf, hessian)
+
+
+def _into_an_escape(planner: NehmoPlanner, q1, q2, goal) -> np.ndarray:
+    """Run the closed loop until the first escaping tick; the own state after that tick."""
+    for _ in range(60):
+        result = planner.plan(q1, {PEER: q2}, goal)
+        q1 = q1 + 0.04 * result.velocity
+        if result.telemetry.escaping:
+            assert planner._escape_left > 0  # the escape goes on for more calls
+            return q1
+    raise AssertionError("the stall was not detected")
+
+
+def test_a_new_goal_ends_an_escape_and_is_followed_at_once(model) -> None:
+    q1, q2, goal = _stalled_case(model)
+    settings = PlannerSettings(deadline=1.0, stall_ticks=5, escape_ticks=10)
+    planner = NehmoPlanner(CELL, OWN, [model], settings)
+    # the same goal (equal values, another object) keeps a running escape going
+    q = _into_an_escape(planner, q1, q2, goal)
+    assert planner.plan(q, {PEER: q2}, goal.tolist()).telemetry.escaping
+    planner.reset()
+    q = _into_an_escape(planner, q1, q2, goal)
+    # a goal up V's gradient (away from the peer): the unconstrained step toward it is safe
+    _, g = model.evaluate(0.1, np.concatenate([q, q2])[None])
+    new_goal = q + 0.3 * np.sign(g[0, :6])
+    result = planner.plan(q, {PEER: q2}, new_goal)
+    assert not result.telemetry.escaping and not result.telemetry.fail_safe
+    toward = new_goal - q
+    cosine = result.velocity @ toward / np.linalg.norm(result.velocity) / np.linalg.norm(toward)
+    assert cosine > 0.9
+    # the stall and escape state restarted from the new goal
+    assert planner._escape_left == 0 and planner._stall == 0 and planner._escapes == 0
+    assert planner._best_error == pytest.approx(np.linalg.norm(q - new_goal))
+
+
+def test_fail_safe_ticks_during_an_escape_are_not_reported_as_escaping(model) -> None:
+    q1, q2, goal = _stalled_case(model)
+    solver = _Switchable()
+    settings = PlannerSettings(deadline=1.0, stall_ticks=5, escape_ticks=10)
+    planner = NehmoPlanner(CELL, OWN, [model], settings, solver=solver)
+    q = _into_an_escape(planner, q1, q2, goal)
+    solver.fail = True
+    result = planner.plan(q, {PEER: q2}, goal)
+    assert result.telemetry.fail_safe and not result.telemetry.escaping
+    assert planner._escape_left > 0  # the escape itself goes on after the fail-safe tick
+
+
+_PEER_Q = f"peers[{PEER!r}]"
+
+
+@pytest.mark.parametrize(
+    ("entry", "parameter"),
+    [
+        ("plan", "q_self"),
+        ("plan", "q_goal"),
+        ("plan", _PEER_Q),
+        ("fail_safe", "q_self"),
+        ("fail_safe", _PEER_Q),
+        ("naive", "q_self"),
+        ("naive", "q_goal"),
+        ("tracker", "q_self"),
+    ],
+)
+def test_batched_joint_vectors_are_rejected_naming_the_parameter(model, entry, parameter) -> None:
+    q1, q2, goal = _near_contact(model, 6, 1)[0]
+    args = {"q_self": q1, "q_goal": goal, _PEER_Q: q2}
+    args[parameter] = args[parameter][None]  # (1, 6): a batch of one
+    q_self, peers, q_goal = args["q_self"], {PEER: args[_PEER_Q]}, args["q_goal"]
+    rule = re.escape(f"`{parameter}` must be one joint vector, shape (6,), not a batch; got (1, 6)")
+    with pytest.raises(InvalidValueError, match=rule):
+        if entry == "plan":
+            NehmoPlanner(CELL, OWN, [model]).plan(q_self, peers, q_goal)
+        elif entry == "fail_safe":
+            NehmoPlanner(CELL, OWN, [model]).fail_safe(q_self, peers)
+        elif entry == "naive":
+            NaivePlanner(CELL, OWN).plan(q_self, peers, q_goal)
+        else:
+            trajectory = retime({OWN: np.array([q1, goal]), PEER: np.array([q2, q2])}, 0.5)
+            TrajectoryTracker(CELL, trajectory, OWN, 0.1).plan(q_self, peers, q_goal)
+
+
+@pytest.mark.parametrize(
+    ("changes", "parameter", "rule"),
+    [
+        ({"self_safety": -0.01}, "self_safety", "must be >= 0"),
+        ({"self_safety": math.nan}, "self_safety", "must be >= 0"),
+        ({"self_influence": 0.004}, "self_influence", "must be > self_safety (0.005)"),
+        ({"escape_seed": -1}, "escape_seed", "must be >= 0"),
+        ({"escape_seed": 1.5}, "escape_seed", "must be an int >= 0"),
+        ({"sqp_max_iter": 2.5}, "sqp_max_iter", "must be an int >= 1"),
+        ({"sqp_max_iter": math.nan}, "sqp_max_iter", "must be an int >= 1"),
+        ({"sqp_max_iter": True}, "sqp_max_iter", "must be an int >= 1"),
+        ({"ipopt_max_iter": 30.0}, "ipopt_max_iter", "must be an int >= 1"),
+        ({"stall_ticks": 2.5}, "stall_ticks", "must be an int >= 1"),
+        ({"stall_ticks": math.nan}, "stall_ticks", "must be an int >= 1"),
+        ({"escape_ticks": 2.5}, "escape_ticks", "must be an int >= 1"),
+        ({"yield_ticks": math.inf}, "yield_ticks", "must be an int >= 1"),
+    ],
+)
+def test_bad_counts_and_self_clearance_settings_name_their_own_rule(
+    changes, parameter, rule
+) -> None:
+    with pytest.raises(InvalidValueError, match=re.escape(f"`{parameter}` {rule}; got")):
+        PlannerSettings(**changes)
+
+
+def test_whole_counts_and_seeds_are_accepted() -> None:
+    s = PlannerSettings(sqp_max_iter=1, stall_ticks=3, escape_seed=0, self_safety=0.0)
+    assert (s.sqp_max_iter, s.stall_ticks, s.escape_seed, s.self_safety) == (1, 3, 0, 0.0)
+    assert PlannerSettings(escape_seed=2**40).escape_seed == 2**40

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.planning.interface import PlanResult, Telemetry, goal_error
+from nehmo_core.planning.interface import PlanResult, Telemetry, goal_error, one_joint_vector
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
@@ -52,8 +52,8 @@ class NaivePlanner:
         self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
     ) -> PlanResult:
         start = time.perf_counter()
-        q = self.robot.check_q(q_self, "q_self")
-        goal = self.robot.check_q(q_goal, "q_goal")
+        q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
+        goal = one_joint_vector(self.robot.check_q(q_goal, "q_goal"), "q_goal")
         error = goal_error(q, goal, self.robot, self.settings.wrap_goal)
         u = np.clip(-error / self.settings.t_plan, -self.settings.u_max, self.settings.u_max)
         return PlanResult(u, Telemetry(time.perf_counter() - start, self.status))
@@ -117,7 +117,7 @@ class TrajectoryTracker:
         self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
     ) -> PlanResult:
         start = time.perf_counter()
-        q = self.robot.check_q(q_self, "q_self")
+        q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
         # One tick of latency: this command acts during the next tick, while the previous one
         # acts now. Aim from where the previous command takes the arm, so that every joint stays
         # on the shared clock (a lagging joint would bend the path the planner checked).

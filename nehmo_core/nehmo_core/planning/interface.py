@@ -18,9 +18,10 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
+from nehmo_core.errors import InvalidValueError
 from nehmo_core.robots.model import Cell, RobotModel
 
-__all__ = ["PlanResult", "Planner", "Telemetry", "check_peers", "goal_error"]
+__all__ = ["PlanResult", "Planner", "Telemetry", "check_peers", "goal_error", "one_joint_vector"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,16 @@ def goal_error(q: np.ndarray, goal: np.ndarray, robot: RobotModel, wrap: bool) -
     if wrap:
         e = robot.wrap(e)
     return e
+
+
+def one_joint_vector(arr: np.ndarray, parameter: str) -> np.ndarray:
+    """``arr`` (from :meth:`RobotModel.check_q`, which also takes batches) if it is one joint
+    vector; a planner's inputs must be, so a batch raises :class:`InvalidValueError`."""
+    if arr.ndim != 1:
+        raise InvalidValueError(
+            parameter, f"must be one joint vector, shape ({arr.shape[-1]},), not a batch", arr.shape
+        )
+    return arr
 
 
 def check_peers(cell: Cell, arm_id: str, peers: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]:

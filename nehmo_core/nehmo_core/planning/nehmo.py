@@ -19,7 +19,8 @@ direction projected onto the tangent space of the critical pair's level set, for
 reached a new low), then heads for the goal again. An arm held at its goal against a peer's
 constraint for ``stall_ticks`` calls yields: for ``yield_ticks`` calls it steps up V's gradient
 of the critical pair (making room for a peer that may be stuck behind it), then returns. Every
-escape step is an Opt solution with the same constraints, so safety is unchanged.
+escape step is an Opt solution with the same constraints, so safety is unchanged. A call with a
+goal other than the previous call's ends any escape or yield and restarts the stall count.
 """
 
 from __future__ import annotations
@@ -35,7 +36,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.planning.interface import PlanResult, Telemetry, check_peers, goal_error
+from nehmo_core.planning.interface import (
+    PlanResult,
+    Telemetry,
+    check_peers,
+    goal_error,
+    one_joint_vector,
+)
 from nehmo_core.planning.ipopt_solver import IpoptSolver
 from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
 from nehmo_core.planning.pair_frame import PairMapping, arm_reach, match_pair
@@ -46,6 +53,12 @@ from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots.model import Cell
 
 __all__ = ["NehmoPlanner", "OptSolver", "SqpSolver", "make_solver"]
+
+
+def _peer_vectors(cell: Cell, arm_id: str, peers: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]:
+    """:func:`check_peers`, with one joint vector per peer (no batches)."""
+    checked = check_peers(cell, arm_id, peers)
+    return {p: one_joint_vector(q, f"peers[{p!r}]") for p, q in checked.items()}
 
 
 class OptSolver(Protocol):
@@ -174,6 +187,12 @@ class NehmoPlanner:
         self._hessian: np.ndarray | None = None  # the last solve's Lagrangian Hessian estimate
         seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape_seed
         self._rng = np.random.default_rng(seed)
+        self._clear_stall()
+
+    def _clear_stall(self) -> None:
+        """Forget the stall and escape state (on reset() and whenever the goal changes; the
+        warm start, Hessian estimate and random stream are kept)."""
+        self._goal: np.ndarray | None = None  # the goal the stall state was gathered toward
         self._stall = 0  # consecutive calls without progress against an active V row
         self._escapes = 0  # escapes since the goal error last reached a new low
         self._escape_left = 0  # calls left in the current escape
@@ -284,8 +303,8 @@ class NehmoPlanner:
         so that a solve that overruns its tick still has a safe command to fall back on.
         Peers missing from ``peers`` are left out (the caller decides what a missing peer means).
         """
-        q = self.robot.check_q(q_self, "q_self")
-        others = check_peers(self.cell, self.arm_id, peers)
+        q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
+        others = _peer_vectors(self.cell, self.arm_id, peers)
         if not any(p in others for p in self.pairs):
             return np.zeros(self.robot.dof)
         return self._fail_safe(self._current(q, others, only_known=True), self._self_rows(q))
@@ -295,14 +314,19 @@ class NehmoPlanner:
     ) -> PlanResult:
         start = time.perf_counter()
         deadline = start + self.settings.deadline
-        q = self.robot.check_q(q_self, "q_self")
-        goal = self.robot.check_q(q_goal, "q_goal")
-        others = check_peers(self.cell, self.arm_id, peers)
+        q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
+        goal = one_joint_vector(self.robot.check_q(q_goal, "q_goal"), "q_goal")
+        others = _peer_vectors(self.cell, self.arm_id, peers)
         missing = [p for p in self.pairs if p not in others]
         if missing:
             raise InvalidValueError(
                 "peers", f"must include every constrained arm {missing}", list(others)
             )
+        if self._goal is None or not np.array_equal(goal, self._goal):
+            # a new goal (a controller need not call reset() between goals): a stall or an
+            # escape toward the old one says nothing about the new one
+            self._clear_stall()
+            self._goal = goal.copy()
         error0 = goal_error(q, goal, self.robot, self.settings.wrap_goal)
         info: dict[str, Any] = {
             "peers_constrained": tuple(self.pairs),
@@ -355,7 +379,7 @@ class NehmoPlanner:
             min_constraint=min_constraint,
             iterations=result.iterations if result is not None else 0,
             critical_peer=critical,
-            escaping=escaping,
+            escaping=escaping and not fail_safe,  # a fail-safe step followed no escape direction
             **info,
         )
         return PlanResult(u, telemetry)

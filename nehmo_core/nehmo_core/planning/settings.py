@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
+from numbers import Integral
 from typing import Any
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
@@ -100,11 +101,11 @@ class PlannerSettings:
             raise InvalidValueError(
                 "fail_safe_deadband", "must lie in [0, 1)", self.fail_safe_deadband
             )
-        if not self.self_influence > self.self_safety >= 0.0:
+        if not self.self_safety >= 0.0:
+            raise InvalidValueError("self_safety", "must be >= 0", self.self_safety)
+        if not self.self_influence > self.self_safety:
             raise InvalidValueError(
-                "self_influence",
-                f"must be > self_safety ({self.self_safety}) >= 0",
-                self.self_influence,
+                "self_influence", f"must be > self_safety ({self.self_safety})", self.self_influence
             )
         if not 0.0 < self.self_gain <= 1.0:
             raise InvalidValueError("self_gain", "must lie in (0, 1]", self.self_gain)
@@ -114,9 +115,13 @@ class PlannerSettings:
         if not self.reach_margin >= 0:
             raise InvalidValueError("reach_margin", "must be >= 0", self.reach_margin)
         counts = ("sqp_max_iter", "ipopt_max_iter", "stall_ticks", "escape_ticks", "yield_ticks")
-        for name in counts:
-            if getattr(self, name) < 1:
-                raise InvalidValueError(name, "must be >= 1", getattr(self, name))
+        for name in (*counts, "escape_seed"):
+            value = getattr(self, name)
+            low = 0 if name == "escape_seed" else 1
+            if not isinstance(value, Integral) or isinstance(value, bool):  # not 2.5, NaN, True
+                raise InvalidValueError(name, f"must be an int >= {low}", value)
+            if value < low:
+                raise InvalidValueError(name, f"must be >= {low}", value)
         if not self.ipopt_tol > 0:
             raise InvalidValueError("ipopt_tol", "must be > 0", self.ipopt_tol)
         if self.solver not in SOLVERS:
