@@ -199,3 +199,44 @@ def test_fast_pde_loss_equals_full_autograd(variant: str) -> None:
     pde = (dw_dtau - system.hamiltonian(xx, dw_dx).clamp(max=0.0)).abs().mean()
     torch.testing.assert_close(fast["pde"], pde, rtol=1e-5, atol=1e-6)
     torch.testing.assert_close(fast["dirichlet"], residual[mask].abs().mean())
+
+
+@pytest.mark.parametrize("pretraining", [False, True])
+def test_squared_dirichlet_term(pretraining: bool) -> None:
+    """``dirichlet_loss="l2"`` puts the mean squared boundary residual into the loss; the logged
+    ``dirichlet`` stays the mean absolute residual, so runs of either kind compare."""
+    from nehmo_core.hjr.networks import ValueNetwork
+
+    system = TwoLinkPair()
+    net = ValueNetwork(system, "bc", NetworkSettings(width=32, hidden_layers=1))
+    gen = torch.Generator().manual_seed(4)
+    x = system.sample_states(256, gen)
+    tau = torch.rand(256, generator=gen) * system.horizon
+    mask = torch.arange(256) >= 200
+    l1 = TrainSettings(variant="bc", dirichlet_weight=40.0)
+    l2 = replace(l1, dirichlet_loss="l2")
+    a = loss_terms(net, l1, tau, x, mask, pretraining=pretraining)
+    b = loss_terms(net, l2, tau, x, mask, pretraining=pretraining)
+    _, residual = net.forward_with_residual(tau, x)
+    on = residual if pretraining else residual[mask]
+    torch.testing.assert_close(a["dirichlet"], on.abs().mean())
+    torch.testing.assert_close(b["dirichlet"], a["dirichlet"])
+    torch.testing.assert_close(b["pde"], a["pde"])
+    torch.testing.assert_close(a["loss"], 40.0 * on.abs().mean() + a["pde"])
+    torch.testing.assert_close(b["loss"], 40.0 * (on * on).mean() + b["pde"])
+
+
+def test_the_12d_preset_and_bad_dirichlet_losses() -> None:
+    preset = TrainSettings.preset("cpu_12d", variant="bc")
+    assert preset.dirichlet_loss == "l2" and preset.network.width == 128
+    assert preset.batch_size == 2000 and preset.lr_schedule == "cosine"
+    assert TrainSettings().dirichlet_loss == "l1"  # DeepReach's, and every earlier run's
+    with pytest.raises(UnknownNameError, match="Dirichlet loss"):
+        TrainSettings(dirichlet_loss="huber")
+
+
+def test_a_sidecar_without_the_dirichlet_loss_means_l1() -> None:
+    data = TINY.to_dict()
+    del data["dirichlet_loss"]
+    data["network"] = TINY.network.to_dict()
+    assert TrainSettings.from_dict(data) == TINY

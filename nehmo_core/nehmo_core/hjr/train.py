@@ -47,6 +47,7 @@ from nehmo_core.hjr.networks import NetworkSettings, ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import HJISystem, make_system, system_names
 
 __all__ = [
+    "DIRICHLET_LOSSES",
     "LR_SCHEDULES",
     "PRESETS",
     "TrainResult",
@@ -66,6 +67,7 @@ MODEL = "model"
 LOG_FILE = "train_log.csv"
 LOG_COLUMNS = ("step", "samples", "tau_max", "loss", "dirichlet", "pde", "wall_s")
 LR_SCHEDULES = ("constant", "cosine", "exponential")
+DIRICHLET_LOSSES = ("l1", "l2")
 
 
 @dataclass(frozen=True)
@@ -73,8 +75,15 @@ class TrainSettings:
     """Everything that defines a training run (stored in every checkpoint's JSON sidecar).
 
     Presets: :meth:`preset` ``"cpu"`` (3×64, batch 500, Adam 3e-4 cosine-decayed, tuned for
-    one CPU thread), ``"cpu_legacy"`` (the dataclass defaults: 3×128, batch 10k, constant 1e-4)
-    and ``"authors"`` (3×512, 65k batch, lr 2e-5, the authors' proportions).
+    one CPU thread), ``"cpu_12d"`` (``cpu`` at 3×128, batch 2000, squared Dirichlet term: for
+    the 12-D arm pairs), ``"cpu_legacy"`` (the dataclass defaults: 3×128, batch 10k, constant
+    1e-4) and ``"authors"`` (3×512, 65k batch, lr 2e-5, the authors' proportions).
+
+    ``dirichlet_loss``: ``"l1"`` is DeepReach's ``|W − l̂|`` at ``τ = 0``; ``"l2"`` its square.
+    With ``l1`` and the ``bc`` variants, the 12-D arm pairs never leave the trivial ``NN ≡ 0``
+    (``V = l``, see :mod:`nehmo_core.hjr.diagnostics`): the absolute value's constant slope at
+    zero pins the residual network there, at any weight we tried. The square's slope vanishes
+    at zero, so small boundary errors cost little and the PDE term can shape the network.
     """
 
     variant: str = "bc+sym"
@@ -88,6 +97,7 @@ class TrainSettings:
     lr_schedule: str = "constant"  # one of LR_SCHEDULES
     lr_final_fraction: float = 0.01  # last step's rate / learning_rate (cosine, exponential)
     dirichlet_weight: float = 40.0
+    dirichlet_loss: str = "l1"  # one of DIRICHLET_LOSSES
     pde_weight: float = 1.0
     seed: int = 0
     checkpoint_every: int = 2_000_000  # [samples]
@@ -106,6 +116,8 @@ class TrainSettings:
             raise InvalidValueError(
                 "curriculum_fraction", "must lie in (0, 1]", self.curriculum_fraction
             )
+        if self.dirichlet_loss not in DIRICHLET_LOSSES:
+            raise UnknownNameError("Dirichlet loss", self.dirichlet_loss, DIRICHLET_LOSSES)
         if self.lr_schedule not in LR_SCHEDULES:
             raise UnknownNameError("learning-rate schedule", self.lr_schedule, LR_SCHEDULES)
         if not 0.0 < self.lr_final_fraction <= 1.0:
@@ -160,6 +172,18 @@ PRESETS: dict[str, TrainSettings] = {
         lr_final_fraction=0.01,
         pretrain_fraction=0.02,
         curriculum_fraction=0.5,
+    ),
+    # The 12-D arm pairs: "cpu" with the width and batch of the shipped models and the squared
+    # Dirichlet term, without which their bc / bc+sym networks stay at V = l (hjr_tuning.md).
+    "cpu_12d": TrainSettings(
+        network=NetworkSettings(width=128, hidden_layers=3),
+        batch_size=2000,
+        learning_rate=3e-4,
+        lr_schedule="cosine",
+        lr_final_fraction=0.01,
+        pretrain_fraction=0.02,
+        curriculum_fraction=0.5,
+        dirichlet_loss="l2",
     ),
     # The first CPU defaults (3×128, batch 10k, constant 1e-4): resumes runs started with them.
     "cpu_legacy": TrainSettings(),
@@ -255,6 +279,13 @@ def _boundary_and_gradient(network: ValueNetwork, x: Tensor) -> tuple[Tensor, Te
     return lhat.detach(), grad.detach()
 
 
+def _dirichlet_penalty(settings: TrainSettings, residual: Tensor) -> Tensor:
+    """The Dirichlet term of the loss: mean ``|r|`` (``l1``) or mean ``r²`` (``l2``)."""
+    if settings.dirichlet_loss == "l2":
+        return (residual * residual).mean()
+    return residual.abs().mean()
+
+
 def loss_terms(
     network: ValueNetwork,
     settings: TrainSettings,
@@ -263,12 +294,14 @@ def loss_terms(
     boundary_mask: Tensor,
     pretraining: bool,
 ) -> dict[str, Tensor]:
-    """``{"loss", "dirichlet", "pde"}`` (scalars; ``loss`` carries the graph)."""
+    """``{"loss", "dirichlet", "pde"}`` (scalars; ``loss`` carries the graph). ``dirichlet``
+    and ``pde`` are mean absolute residuals whatever ``dirichlet_loss`` puts into ``loss``."""
     zero = tau.new_zeros(())
     if pretraining:
         _, residual = network.forward_with_residual(tau, x)
         dirichlet = residual.abs().mean()
-        return {"loss": settings.dirichlet_weight * dirichlet, "dirichlet": dirichlet, "pde": zero}
+        penalty = _dirichlet_penalty(settings, residual)
+        return {"loss": settings.dirichlet_weight * penalty, "dirichlet": dirichlet, "pde": zero}
     tau = tau.detach().requires_grad_(True)
     x = x.detach().requires_grad_(True)
     if network.variant == "deepreach":
@@ -289,8 +322,12 @@ def loss_terms(
         w = lhat + residual
     hamiltonian = network.system.hamiltonian(x, dw_dx)
     pde = (dw_dtau - hamiltonian.clamp(max=0.0)).abs().mean()
-    dirichlet = residual[boundary_mask].abs().mean() if bool(boundary_mask.any()) else zero
-    loss = settings.dirichlet_weight * dirichlet + settings.pde_weight * pde
+    if bool(boundary_mask.any()):
+        on_boundary = residual[boundary_mask]
+        dirichlet, penalty = on_boundary.abs().mean(), _dirichlet_penalty(settings, on_boundary)
+    else:
+        dirichlet = penalty = zero
+    loss = settings.dirichlet_weight * penalty + settings.pde_weight * pde
     return {"loss": loss, "dirichlet": dirichlet, "pde": pde}
 
 
@@ -644,6 +681,7 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lr", type=float, help="initial Adam learning rate")
     parser.add_argument("--lr-schedule", help=f"one of {list(LR_SCHEDULES)}")
     parser.add_argument("--lr-final", type=float, help="last rate as a share of --lr")
+    parser.add_argument("--dirichlet-loss", help=f"one of {list(DIRICHLET_LOSSES)}")
     parser.add_argument("--checkpoint-every", default=None, help="samples between checkpoints")
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -671,6 +709,8 @@ def settings_from_args(args: argparse.Namespace) -> TrainSettings:
         overrides["lr_schedule"] = args.lr_schedule
     if args.lr_final is not None:
         overrides["lr_final_fraction"] = args.lr_final
+    if args.dirichlet_loss is not None:
+        overrides["dirichlet_loss"] = args.dirichlet_loss
     if args.checkpoint_every is not None:
         overrides["checkpoint_every"] = parse_count(args.checkpoint_every, "checkpoint_every")
     return replace(base, **overrides)
