@@ -417,3 +417,27 @@ def test_planner_setting_overrides_are_typed_and_checked() -> None:
         parse_settings(["escape=maybe"])
     with pytest.raises(InvalidValueError, match="stall_ticks must be an integer"):
         parse_settings(["stall_ticks=1.5"])
+
+
+def test_one_line_summaries_give_the_papers_cr_and_self_collisions_apart() -> None:
+    from types import SimpleNamespace
+
+    from nehmo_core.eval.batch import _postfix
+    from nehmo_ros.orchestrate import format_metrics
+
+    episodes = [
+        SimpleNamespace(outcome="collision", collision_kind="self"),
+        SimpleNamespace(outcome="success", collision_kind=None),
+    ]
+    assert _postfix(episodes) == "SR 50% CR 0% self 50%"
+    metrics = {
+        "sr": 50.0,
+        "cr": 50.0,  # every collision, as the authors' code counts
+        "cr_inter_arm": 0.0,
+        "self_collision_rate": 50.0,
+        "stuck_rate": 0.0,
+        "plan_time_ms": {"mean": 1.0, "std": 0.5},
+        "mpl": {"mean": 2.0},
+        "episodes": 2,
+    }
+    assert format_metrics(metrics).startswith("SR 50 %  CR 0 %  self 50 %  stuck 0 %")

@@ -288,7 +288,9 @@ def format_metrics(metrics: dict[str, Any] | None) -> str:
         return "no episode could be evaluated"
     pt, mpl = metrics["plan_time_ms"], metrics["mpl"]
     return (
-        f"SR {metrics['sr']:.0f} %  CR {metrics['cr']:.0f} %  stuck {metrics['stuck_rate']:.0f} %"
+        f"SR {metrics['sr']:.0f} %  CR {metrics.get('cr_inter_arm', metrics['cr']):.0f} %"
+        f"  self {metrics.get('self_collision_rate', 0.0):.0f} %"
+        f"  stuck {metrics['stuck_rate']:.0f} %"
         f"  plan time {pt['mean']:.2f} ± {pt['std']:.2f} ms  MPL {mpl['mean']:.2f} rad"
         f"  ({metrics['episodes']} episodes)"
     )

@@ -227,9 +227,11 @@ def run_rows(
 
 
 def _postfix(results: Any) -> str:
+    """SR, the paper's CR (between arms) and self-collisions so far."""
     outcomes = [r.outcome for r in results]
+    kinds = [r.collision_kind for r in results]
     n = len(outcomes) or 1
     return (
         f"SR {100 * outcomes.count('success') / n:.0f}% "
-        f"CR {100 * outcomes.count('collision') / n:.0f}%"
+        f"CR {100 * kinds.count('inter-arm') / n:.0f}% self {100 * kinds.count('self') / n:.0f}%"
     )

@@ -168,7 +168,8 @@ def run(args: argparse.Namespace) -> int:
     def report(run: RowRun) -> None:
         m = run.metrics
         print(
-            f"{args.setup} {run.row}: SR {m.sr:.0f}% CR {m.cr:.0f}% stuck {m.stuck_rate:.0f}% "
+            f"{args.setup} {run.row}: SR {m.sr:.0f}% CR {m.cr_inter_arm:.0f}% "
+            f"self {m.self_collision_rate:.0f}% stuck {m.stuck_rate:.0f}% "
             f"time {m.plan_time_ms[0]:.1f} ± {m.plan_time_ms[1]:.1f} ms, "
             f"{run.wall_seconds:.0f} s wall",
             file=sys.stderr,
