@@ -17,7 +17,7 @@ import argparse
 import time
 from pathlib import Path
 
-from nehmo_core.errors import NehmoError
+from nehmo_core.errors import InvalidValueError, NehmoError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -41,12 +41,16 @@ def run(args: argparse.Namespace) -> int:
     from nehmo_core.robots import load_cell
     from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
 
+    if args.index < 0:
+        raise InvalidValueError("index", "must be >= 0", args.index)
     out = Path(args.out).resolve()
+    if out.exists() and not out.is_dir():
+        raise InvalidValueError("out", "must be a directory (it is a file)", str(out))
+    settings = SuiteSettings(planner=args.planner, model=args.model, time_limit=args.time_limit)
     out.mkdir(parents=True, exist_ok=True)
     cell = load_cell("dual_ur5")
     scenarios = generate_scenario_set(cell, args.seed, args.index + 1)
     scenario_file = save_scenario_set(scenarios, out / "scenarios.json")
-    settings = SuiteSettings(planner=args.planner, model=args.model, time_limit=args.time_limit)
     print(
         f"dual_ur5, scenario {args.index} of seed {args.seed}: sim_bridge + "
         f"{len(cell.arms)} x arm_planner ({args.planner}, model {args.model}) + recorder "

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from nehmo_core.errors import InvalidValueError, NehmoError
+from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
 from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log
 from nehmo_core.eval.report import json_safe
 from nehmo_core.eval.setups import parse_row
@@ -72,6 +72,31 @@ class SuiteSettings:
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))
         if self.domain_id is not None and not 0 <= self.domain_id <= 232:
             raise InvalidValueError("domain_id", "must lie in [0, 232]", self.domain_id)
+        check_row_and_model(self.planner, self.model)
+
+
+def check_row_and_model(planner: str, model: str) -> None:
+    """What every ``arm_planner`` would reject, checked before any process starts: each kind
+    of the row (one, or one per arm joined by '/') and each source of ``model``."""
+    from nehmo_core.eval.planners import SYNTHETIC, parse_value_models
+    from nehmo_core.hjr.train import SHIPPED_VALUE_FUNCTIONS
+    from nehmo_core.planning.factory import DECENTRALIZED
+
+    for kind in planner.split("/"):
+        if kind not in DECENTRALIZED:
+            raise UnknownNameError("planner", kind, DECENTRALIZED)
+    text = model.strip()
+    if text in ("", "shipped"):
+        return
+    for source in parse_value_models([i.strip() for i in text.split(",") if i.strip()]):
+        known = source.source in SHIPPED_VALUE_FUNCTIONS or source.source == SYNTHETIC
+        if not known and not Path(source.source).exists():
+            raise InvalidValueError(
+                "model",
+                "must be 'shipped', 'synthetic', a shipped pair "
+                f"{sorted(SHIPPED_VALUE_FUNCTIONS)} or an existing path, per [KIND=]SOURCE item",
+                str(source),
+            )
 
 
 def isolated_domain() -> int:
