@@ -240,3 +240,13 @@ def test_a_sidecar_without_the_dirichlet_loss_means_l1() -> None:
     del data["dirichlet_loss"]
     data["network"] = TINY.network.to_dict()
     assert TrainSettings.from_dict(data) == TINY
+
+
+def test_cli_resume_without_a_checkpoint_is_an_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--system", "air3d", "--out", str(tmp_path / "new"), "--resume"])
+    assert exit_info.value.code == 2
+    assert "holds no checkpoint to --resume from" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()

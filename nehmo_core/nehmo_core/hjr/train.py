@@ -720,6 +720,8 @@ def run_train(args: argparse.Namespace) -> int:
     """Run ``nehmo train`` from parsed arguments; returns the process exit code."""
     system = make_system(args.system)
     settings = settings_from_args(args)
+    if args.resume and not (Path(args.out) / f"{CHECKPOINT}.json").exists():
+        raise InvalidValueError("out", "holds no checkpoint to --resume from", str(args.out))
     if args.threads is not None:
         if args.threads < 1:
             raise InvalidValueError("threads", "must be >= 1", args.threads)
