@@ -119,6 +119,13 @@ def generate(spec: DatasetSpec, workers: int = 2) -> tuple[np.ndarray, np.ndarra
     d_u = exact_distances(spec.pair, q_u, workers, "uniform")
     qs, ds = [q_u], [d_u]
     seeds = q_u[np.abs(d_u) < spec.near]
+    if spec.n_boundary > 0 and not len(seeds):
+        raise InvalidValueError(
+            "n_boundary",
+            f"needs near-contact seeds (|d| < {spec.near} m) among the uniform samples, and "
+            f"none of the {spec.n_uniform} drawn is; draw more uniform samples",
+            spec.n_boundary,
+        )
     made = 0
     while made < spec.n_boundary and len(seeds):
         n = min(spec.n_boundary - made, 100_000)
