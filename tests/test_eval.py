@@ -441,3 +441,13 @@ def test_one_line_summaries_give_the_papers_cr_and_self_collisions_apart() -> No
         "episodes": 2,
     }
     assert format_metrics(metrics).startswith("SR 50 %  CR 0 %  self 50 %  stuck 0 %")
+
+
+def test_evaluate_with_out_naming_a_file_is_one_clear_error(tmp_path: Path) -> None:
+    from nehmo_core.eval.cli import main as evaluate_main
+
+    a_file = tmp_path / "results"
+    a_file.write_text("")
+    args = ["--setup", "dual_ur5", "--planners", "naive", "--episodes", "1", "--out", str(a_file)]
+    assert evaluate_main(args) == 2
+    assert a_file.read_text() == ""

@@ -143,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
     cell = get_setup(args.setup).load_cell()
     for row in rows:  # fail before any work on a bad row
         parse_row(row, cell)
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise InvalidValueError("--out", "must be a directory (it is a file)", str(args.out))
     planner_settings = PlannerSettings()
     if args.deadline is not None:
         planner_settings = planner_settings.replace(deadline=args.deadline)
