@@ -30,6 +30,11 @@ CASES = [
         "`real_time_factor` must be 1 without sim_time",
     ),
     ("nehmo_ros.recorder", ["cell:=dual_ur5", "output:=run.txt"], "`output` must be a path"),
+    (
+        "nehmo_ros.recorder",
+        ["cell:=dual_ur5", "output:=run.mcap", "flush_interval:=-0.5"],
+        "`flush_interval` must be > 0; got -0.5",
+    ),
 ]
 
 
@@ -46,6 +51,7 @@ CASES = [
         "cell",
         "rtf",
         "out",
+        "flush_interval",
     ],
 )
 def test_invalid_parameter_stops_the_node_with_one_line(

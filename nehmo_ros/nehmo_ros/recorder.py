@@ -97,6 +97,9 @@ class RecorderNode:
         if p["stamp_source"] not in STAMP_SOURCES:
             raise UnknownNameError("stamp_source", p["stamp_source"], STAMP_SOURCES)
         self.by_header = p["stamp_source"] == "header"
+        for name in ("flush_every", "flush_interval"):  # checked under the node's own names
+            if not float(p[name]) > 0:
+                raise InvalidValueError(name, "must be > 0", p[name])
         settings = WriterSettings(
             flush_every=int(p["flush_every"]), flush_interval_s=float(p["flush_interval"])
         )
