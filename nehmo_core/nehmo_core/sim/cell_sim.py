@@ -8,6 +8,7 @@ not missed. The same class serves the batch episode runner and the ROS simulatio
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -35,10 +36,10 @@ class CellSimulator:
     """Joint positions of every arm of ``cell``, advanced by velocity commands."""
 
     def __init__(self, cell: Cell, substeps: int = 10, self_collision: bool = True) -> None:
-        if substeps < 1:
-            raise InvalidValueError("substeps", "must be >= 1", substeps)
+        if not substeps >= 1 or int(substeps) != substeps:  # not 0, 2.5 or NaN
+            raise InvalidValueError("substeps", "must be an int >= 1", substeps)
         self.cell = cell
-        self.substeps = substeps
+        self.substeps = int(substeps)
         self.self_collision = self_collision
         self.world = CellWorld(cell)
         self.time = 0.0
@@ -61,7 +62,8 @@ class CellSimulator:
                 "q", f"must give every arm (missing {sorted(missing)})", list(q)
             )
         for arm_id, qa in q.items():
-            self.q[arm_id] = self.cell.arm(arm_id).robot.check_q(qa, f"q[{arm_id}]").copy()
+            robot = self.cell.arm(arm_id).robot
+            self.q[arm_id] = robot.check_within_limits(qa, f"q[{arm_id}]").copy()
         self.world.set_configuration(self.q)
         self.time = time
 
@@ -73,21 +75,37 @@ class CellSimulator:
     def step(self, commands: Mapping[str, ArrayLike], dt: float) -> StepResult:
         """Integrate joint velocities ``commands`` [rad/s] over ``dt`` [s].
 
-        Arms without a command hold still. Joint positions are clamped to the joint limits.
+        Arms without a command hold still; a command for an arm the cell does not have, or
+        faster than a joint's velocity limit, is an error. Joint positions are clamped to the
+        joint limits.
         Collisions are checked at ``substeps`` instants; the first colliding instant ends the
         check (the configuration is still advanced over the whole step).
         """
-        if not dt > 0:
-            raise InvalidValueError("dt", "must be > 0 [s]", dt)
+        if not 0 < dt < math.inf:
+            raise InvalidValueError("dt", "must be > 0 and finite [s]", dt)
+        unknown = sorted(set(commands) - set(self.cell.arm_ids))
+        if unknown:
+            raise InvalidValueError(
+                "commands",
+                f"must name arms of cell {self.cell.name!r} {list(self.cell.arm_ids)}",
+                unknown,
+            )
         start = {k: v.copy() for k, v in self.q.items()}
         vel = {}
         for arm in self.cell.arms:
             u = commands.get(arm.arm_id)
-            vel[arm.arm_id] = (
-                np.zeros(arm.robot.dof)
-                if u is None
-                else arm.robot.check_q(u, f"command[{arm.arm_id}]")
-            )
+            if u is None:
+                vel[arm.arm_id] = np.zeros(arm.robot.dof)
+                continue
+            v = arm.robot.check_q(u, f"command[{arm.arm_id}]")
+            limit = np.array([j.velocity for j in arm.robot.joints])
+            if np.any(np.abs(v) > limit + 1e-9):
+                raise InvalidValueError(
+                    f"command[{arm.arm_id}]",
+                    f"must respect the joint velocity limits {limit.tolist()} [rad/s]",
+                    v.tolist(),
+                )
+            vel[arm.arm_id] = v
         result = StepResult()
         for k in range(1, self.substeps + 1):
             s = dt * k / self.substeps
