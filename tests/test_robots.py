@@ -117,6 +117,18 @@ def test_cell_yaml_errors_name_the_field(tmp_path: Path) -> None:
         cell_from_dict({"arms": [{"id": "a", "robot": "ur5"}, {"id": "a", "robot": "ur5"}]})
     with pytest.raises(InvalidValueError, match="xyz"):
         cell_from_dict({"arms": [{"id": "a", "robot": "ur5", "base": {"xyz": [0, 0]}}]})
+    arm = {"id": "a", "robot": "ur5"}
+    for base, field in (
+        ({"xzy": [0, 0, 1]}, r"arms\[0\]\.base` may only have keys xyz, rpy"),  # misspelt
+        ({"xyz": [float("nan"), 0, 0]}, r"arms\[0\]\.base\.xyz` must be a list of 3 finite"),
+        ({"xyz": "0 0 0"}, r"arms\[0\]\.base\.xyz`"),
+        ({"rpy": 1.0}, r"arms\[0\]\.base\.rpy`"),
+        ([0, 0, 0], r"arms\[0\]\.base` must be a mapping"),
+    ):
+        with pytest.raises(InvalidValueError, match=field):
+            cell_from_dict({"arms": [{**arm, "base": base}]})
+    with pytest.raises(InvalidValueError, match=r"arms\[0\]` may only have keys"):
+        cell_from_dict({"arms": [{**arm, "bsae": {"xyz": [0, 0, 1]}}]})
     bad = tmp_path / "bad.yaml"
     bad.write_text("arms: [unclosed")
     with pytest.raises(NehmoError, match="not valid YAML"):

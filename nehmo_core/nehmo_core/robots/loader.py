@@ -22,7 +22,7 @@ from typing import Any
 import yaml
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError, UnknownNameError
-from nehmo_core.robots.model import ArmSpec, Cell, JointSpec, RobotModel, as_pose
+from nehmo_core.robots.model import ArmSpec, Cell, JointSpec, Pose, RobotModel, as_pose
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 CELLS_DIR = Path(__file__).resolve().parent / "cells"
@@ -180,6 +180,29 @@ def _require(mapping: dict[str, Any], key: str, where: str) -> Any:
     return mapping[key]
 
 
+def _base_pose(base: Any, where: str) -> Pose:
+    """An arm's ``base: {xyz: [3 m], rpy: [3 rad]}`` (both optional, zeros by default)."""
+    base = {} if base is None else base
+    if not isinstance(base, dict):
+        raise InvalidValueError(where, "must be a mapping with keys xyz, rpy", base)
+    extra = sorted(set(base) - {"xyz", "rpy"})
+    if extra:
+        raise InvalidValueError(where, "may only have keys xyz, rpy", extra)
+    values = {}
+    for key, unit in (("xyz", "m"), ("rpy", "rad")):
+        raw = base.get(key, [0.0, 0.0, 0.0])
+        try:
+            numbers = [float(v) for v in raw] if isinstance(raw, list) else None
+        except (TypeError, ValueError):
+            numbers = None
+        if numbers is None or len(numbers) != 3 or not all(math.isfinite(v) for v in numbers):
+            raise InvalidValueError(
+                f"{where}.{key}", f"must be a list of 3 finite numbers [{unit}]", raw
+            )
+        values[key] = numbers
+    return as_pose(values["xyz"], values["rpy"])
+
+
 def cell_from_dict(data: Any, source: str = "<cell>") -> Cell:
     """Build a :class:`Cell` from its YAML mapping, checking every field."""
     if not isinstance(data, dict):
@@ -197,10 +220,11 @@ def cell_from_dict(data: Any, source: str = "<cell>") -> Cell:
             raise InvalidValueError(
                 f"{where}.id", "must be a valid ROS name (letter, then letters, digits, _)", arm_id
             )
+        extra = sorted(set(a) - {"id", "robot", "base"})
+        if extra:
+            raise InvalidValueError(where, "may only have keys id, robot, base", extra)
         robot = load_robot(str(_require(a, "robot", where)))
-        base = a.get("base", {}) or {}
-        pose = as_pose(base.get("xyz", [0.0, 0.0, 0.0]), base.get("rpy", [0.0, 0.0, 0.0]))
-        arms.append(ArmSpec(arm_id, robot, pose))
+        arms.append(ArmSpec(arm_id, robot, _base_pose(a.get("base", {}), f"{where}.base")))
     ids = [a.arm_id for a in arms]
     if len(set(ids)) != len(ids):
         raise InvalidValueError(f"{source}.arms", "must have unique ids", ids)
