@@ -160,29 +160,27 @@ class TrainSettings:
         return cls(**values)
 
 
+# Tuned on Air3D for one CPU thread (bench/results/hjr_tuning.md): a small SIREN and many small
+# steps with a cosine-decayed rate beat a wide network and few large steps at the same sample
+# budget; most of the time budget goes to the full horizon.
+_CPU = TrainSettings(
+    network=NetworkSettings(width=64, hidden_layers=3),
+    batch_size=500,
+    learning_rate=3e-4,
+    lr_schedule="cosine",
+    lr_final_fraction=0.01,
+    pretrain_fraction=0.02,
+    curriculum_fraction=0.5,
+)
+
 PRESETS: dict[str, TrainSettings] = {
-    # Tuned on Air3D for one CPU thread (bench/results/hjr_tuning.md): a small SIREN and many
-    # small steps with a cosine-decayed rate beat a wide network and few large steps at the
-    # same sample budget; most of the time budget goes to the full horizon.
-    "cpu": TrainSettings(
-        network=NetworkSettings(width=64, hidden_layers=3),
-        batch_size=500,
-        learning_rate=3e-4,
-        lr_schedule="cosine",
-        lr_final_fraction=0.01,
-        pretrain_fraction=0.02,
-        curriculum_fraction=0.5,
-    ),
+    "cpu": _CPU,
     # The 12-D arm pairs: "cpu" with the width and batch of the shipped models and the squared
     # Dirichlet term, without which their bc / bc+sym networks stay at V = l (hjr_tuning.md).
-    "cpu_12d": TrainSettings(
+    "cpu_12d": replace(
+        _CPU,
         network=NetworkSettings(width=128, hidden_layers=3),
         batch_size=2000,
-        learning_rate=3e-4,
-        lr_schedule="cosine",
-        lr_final_fraction=0.01,
-        pretrain_fraction=0.02,
-        curriculum_fraction=0.5,
         dirichlet_loss="l2",
     ),
     # The first CPU defaults (3×128, batch 10k, constant 1e-4): resumes runs started with them.
