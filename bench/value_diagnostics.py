@@ -2,7 +2,8 @@
 
     ./run python bench/value_diagnostics.py   # writes bench/results/value_diagnostics.{json,md}
 
-For every shipped value function and every Table I run kept in ``bench/results/hjr_runs``:
+For every shipped value function and every Table I run in ``bench/results/hjr_runs`` whose
+weights are at hand (the repository keeps their logs only):
 :func:`nehmo_core.hjr.diagnostics.pde_diagnostics` on 8192 states drawn as training draws them.
 A residual ratio near 1 means the network meets the PDE no better than ``V = l`` does (its
 residual stayed at zero: a distance, not a reachability value); the Table I runs, which agree
@@ -33,7 +34,9 @@ def run(samples: int) -> dict[str, Any]:
             d = pde_diagnostics(load_value_function(name, variant=variant), samples)
             rows.append({"model": f"{name} {variant}", "kind": "shipped", **d.to_dict()})
             print(rows[-1])
-    for run_dir in sorted((RESULTS / "hjr_runs").glob("*_40M_s0")):
+    # the Table I runs whose weights are at hand (the repository keeps their logs, not weights)
+    runs = (RESULTS / "hjr_runs").glob("*_40M_s0/model.safetensors")
+    for run_dir in sorted(path.parent for path in runs):
         d = pde_diagnostics(load_value_function(run_dir), samples)
         rows.append({"model": run_dir.name, "kind": "Table I run", **d.to_dict()})
         print(rows[-1])
