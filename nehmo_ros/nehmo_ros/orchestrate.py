@@ -78,17 +78,15 @@ class SuiteSettings:
 def check_row_and_model(planner: str, model: str) -> None:
     """What every ``arm_planner`` would reject, checked before any process starts: each kind
     of the row (one, or one per arm joined by '/') and each source of ``model``."""
-    from nehmo_core.eval.planners import SYNTHETIC, parse_value_models
+    from nehmo_core.eval.planners import SYNTHETIC
     from nehmo_core.hjr.train import SHIPPED_VALUE_FUNCTIONS
     from nehmo_core.planning.factory import DECENTRALIZED
+    from nehmo_ros.planners import model_sources
 
     for kind in planner.split("/"):
         if kind not in DECENTRALIZED:
             raise UnknownNameError("planner", kind, DECENTRALIZED)
-    text = model.strip()
-    if text in ("", "shipped"):
-        return
-    for source in parse_value_models([i.strip() for i in text.split(",") if i.strip()]):
+    for source in model_sources(model):
         known = source.source in SHIPPED_VALUE_FUNCTIONS or source.source == SYNTHETIC
         if not known and not Path(source.source).exists():
             raise InvalidValueError(

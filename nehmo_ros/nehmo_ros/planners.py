@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
-from nehmo_core.eval.planners import ModelRegistry, parse_value_models
+from nehmo_core.eval.planners import ModelRegistry, ValueModelSource, parse_value_models
 from nehmo_core.eval.setups import OPT_KINDS
 from nehmo_core.planning.factory import DECENTRALIZED, make_planner
 from nehmo_core.planning.interface import Planner
@@ -28,22 +28,28 @@ from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
-__all__ = ["SHIPPED", "build_planner", "model_registry", "warm_up"]
+__all__ = ["SHIPPED", "build_planner", "model_registry", "model_sources", "warm_up"]
 
 SHIPPED = "shipped"
 
 
-def model_registry(model: str) -> ModelRegistry:
-    """The registry for the ``model`` parameter (``shipped``, ``synthetic`` or sources)."""
+def model_sources(model: str) -> tuple[ValueModelSource, ...]:
+    """The value-model sources the ``model`` parameter names (none for ``shipped``)."""
     text = model.strip()
     if text in ("", SHIPPED):
-        return ModelRegistry()
+        return ()
     items = [item.strip() for item in text.split(",") if item.strip()]
     if not items:
         raise InvalidValueError(
             "model", "must be 'shipped', 'synthetic' or [KIND=]PATH items", model
         )
-    return ModelRegistry(parse_value_models(items))
+    return parse_value_models(items)
+
+
+def model_registry(model: str) -> ModelRegistry:
+    """The registry for the ``model`` parameter (``shipped``, ``synthetic`` or sources)."""
+    sources = model_sources(model)
+    return ModelRegistry(sources) if sources else ModelRegistry()
 
 
 def build_planner(
