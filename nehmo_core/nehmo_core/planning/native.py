@@ -103,6 +103,10 @@ class NativeLoop:
         self.iterate_fn.restype = _I
         self.iterate_fn.argtypes = [_I, _I, _P, _D, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
         self.iterate_fn.argtypes += [_I, _D, _D, _I, _D, _P, _P, _P, _P]
+        self.solve_fn = library.nehmo_sqp_solve
+        self.solve_fn.restype = _I
+        self.solve_fn.argtypes = [_I, _I, _P, _D, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
+        self.solve_fn.argtypes += [_P, _P, _D, _D, _D, _I, _D, _P, _P, _P, _P, _P, _P, _P]
         self.qp_fn = library.nehmo_qp_check
         self.qp_fn.restype = _I
         self.qp_fn.argtypes = [_P, _P, _I, _I, _P, _P, _P, _P, _P, _P, _P, _P]
@@ -253,6 +257,75 @@ class NativeLoop:
         if code == 5:
             raise NehmoError("evaluation of a pair model's V/∇V failed in the SQP loop")
         return STATUSES[code], iterations.value, y, B, c, flag.value
+
+    def solve(
+        self,
+        problem: OptProblem,
+        y_start: np.ndarray,
+        naive: np.ndarray,
+        naive_values: tuple[np.ndarray, np.ndarray],
+        B: np.ndarray,
+        keep: np.ndarray,
+        screen: float | None,
+        tol: float,
+        max_iter: int,
+        deadline: float,
+        feasibility_tol: float,
+    ) -> tuple[str, int, np.ndarray, np.ndarray, np.ndarray | None, int] | None:
+        """:func:`.sqp.solve_sqp` after its naive-step check, in one C call: the screened
+        iterations from ``y_start`` (in the box) and the restarts from the naive step (whose
+        rows' ``naive_values`` are at hand) and from ``y = 0``. ``(status, iterations, y, c,
+        Hessian estimate or None, QP flag)``, or ``None`` when a model has no C handle or the
+        problem exceeds the C loop's sizes."""
+        prepared = self._prepare(problem)
+        if prepared is None:
+            return None
+        n, rows = len(y_start), problem.constraints.value_count
+        e0 = np.ascontiguousarray(problem.error0, dtype=np.float64)
+        start = np.ascontiguousarray(y_start, dtype=np.float64)
+        naive = np.ascontiguousarray(naive, dtype=np.float64)
+        c0 = np.ascontiguousarray(naive_values[0], dtype=np.float64)
+        J0 = np.ascontiguousarray(naive_values[1], dtype=np.float64)
+        B0 = np.ascontiguousarray(B, dtype=np.float64)
+        keep8 = np.ascontiguousarray(keep, dtype=np.uint8)
+        y, c, B_out = np.empty(n), np.empty(prepared.m), np.empty((n, n))
+        iterations, flag = ctypes.c_int(), ctypes.c_int()
+        tau, eps, ngroups, groups, nlin, A, b = prepared.fixed
+        code = self.solve_fn(
+            n,
+            rows,
+            e0.ctypes.data,
+            problem.y_max,
+            tau,
+            eps,
+            ngroups,
+            groups,
+            nlin,
+            A,
+            b,
+            start.ctypes.data,
+            naive.ctypes.data,
+            c0.ctypes.data,
+            J0.ctypes.data,
+            B0.ctypes.data,
+            keep8.ctypes.data,
+            np.inf if screen is None else screen,
+            tol,
+            feasibility_tol,
+            max_iter,
+            deadline,
+            self.quadprog,
+            ctypes.addressof(self.settings),
+            y.ctypes.data,
+            c.ctypes.data,
+            B_out.ctypes.data,
+            ctypes.byref(iterations),
+            ctypes.byref(flag),
+        )
+        if code == 5:
+            raise NehmoError("evaluation of a pair model's V/∇V failed in the SQP loop")
+        hessian = B_out if code == 0 else None
+        return STATUSES[code], iterations.value, y, c, hessian, flag.value
 
 
 def _check(native: NativeLoop) -> str | None:

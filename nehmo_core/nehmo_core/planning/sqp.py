@@ -141,6 +141,15 @@ def solve_sqp(
     if screen is not None and rows > 1:
         keep = c[:rows] < screen
     y = np.minimum(np.maximum(y_start, -ymax), ymax)
+    if native and (c_loop := loop()) is not None:
+        out = c_loop.solve(
+            problem, y, naive, (c, J), B, keep, screen, tol, max_iter, deadline, feasibility_tol
+        )
+        if out is not None:
+            status, iterations, y, c, hessian, flag = out
+            if status == "failed":
+                status = f"failed (QP exit flag {flag})"
+            return SolveResult(y, status, iterations, c, hessian)
     args = (tol, deadline, feasibility_tol, screen, native)
 
     def at(start: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

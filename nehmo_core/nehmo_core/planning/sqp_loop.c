@@ -61,6 +61,7 @@ typedef struct {
   nehmo_group* groups;
   const double* A; /* (nlin, n) */
   const double* b; /* (nlin,) */
+  const unsigned char* active; /* per V row (group order): carried or not; NULL: every row */
 } nehmo_problem;
 
 static double nehmo_now(void) {
@@ -69,13 +70,15 @@ static double nehmo_now(void) {
   return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
 }
 
-/* c = V - eps and J = dV/dy at step y; linear rows A y - b after the V rows. */
+/* c = V - eps and J = dV/dy at step y for the active V rows (packed, in order); the nlin
+ * linear rows A y - b after them. */
 static int nehmo_evaluate(const nehmo_problem* p, const double* y, double* c, double* J) {
-  int row = 0, n = p->n;
+  int row = 0, n = p->n, index = 0;
   for (int gi = 0; gi < p->ngroups; ++gi) {
     nehmo_group* grp = &p->groups[gi];
     for (int s = 0; s < grp->k; ++s) {
       double v;
+      if (p->active && !p->active[index++]) continue;
       memcpy(grp->x, grp->states + (size_t)s * grp->n, sizeof(double) * grp->n);
       for (int j = 0; j < n; ++j) grp->x[j] += y[j];
       grp->arg[0] = &p->tau;
@@ -186,15 +189,15 @@ int nehmo_qp_check(nehmo_daqp_quadprog quadprog, void* settings, int n, int m, d
   return nehmo_qp(quadprog, settings, n, m, B, grad, c, J, lo, hi, p, lam);
 }
 
-/* Returns a status (enum above); y, B, c (m,), J (m, n) hold the final iterate. */
-int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, double tau, double eps,
-                      int ngroups, nehmo_group* groups, int nlin, const double* A,
-                      const double* b, double* y, double* B, double* c, double* J,
-                      int evaluated, double tol,
-                      double feasibility_tol, int max_iter, double deadline,
-                      nehmo_daqp_quadprog quadprog, void* settings, int* iterations,
-                      int* qp_flag) {
-  nehmo_problem prob = {n, m, ngroups, nlin, error0, ymax, tau, eps, groups, A, b};
+/* The iterations on prob's rows (prob->m of them: the active V rows and the linear ones).
+ * Returns a status (enum above); y, B, c (m,), J (m, n) hold the final iterate. */
+static int nehmo_iterate(const nehmo_problem* problem, double* y, double* B, double* c, double* J,
+                         int evaluated, double tol, double feasibility_tol, int max_iter,
+                         double deadline, nehmo_daqp_quadprog quadprog, void* settings,
+                         int* iterations, int* qp_flag) {
+  const nehmo_problem prob = *problem;
+  const int n = prob.n, m = prob.m;
+  const double *error0 = prob.error0, ymax = prob.ymax;
   double grad[NEHMO_MAX_N], lo[NEHMO_MAX_N], hi[NEHMO_MAX_N], p[NEHMO_MAX_N];
   double y_new[NEHMO_MAX_N], s[NEHMO_MAX_N], r[NEHMO_MAX_N], lam[NEHMO_MAX_M];
   double c_new[NEHMO_MAX_M], J_new[NEHMO_MAX_M * NEHMO_MAX_N];
@@ -269,4 +272,141 @@ int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, double ta
     }
   }
   return NEHMO_ITERATION_LIMIT;
+}
+
+/* Returns a status (enum above); y, B, c (m,), J (m, n) hold the final iterate. */
+int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, double tau, double eps,
+                      int ngroups, nehmo_group* groups, int nlin, const double* A,
+                      const double* b, double* y, double* B, double* c, double* J,
+                      int evaluated, double tol,
+                      double feasibility_tol, int max_iter, double deadline,
+                      nehmo_daqp_quadprog quadprog, void* settings, int* iterations,
+                      int* qp_flag) {
+  nehmo_problem prob = {n, m, ngroups, nlin, error0, ymax, tau, eps, groups, A, b, NULL};
+  return nehmo_iterate(&prob, y, B, c, J, evaluated, tol, feasibility_tol, max_iter, deadline,
+                       quadprog, settings, iterations, qp_flag);
+}
+
+/* The solve's fixed arguments (those of nehmo_sqp_solve below). */
+typedef struct {
+  nehmo_problem prob; /* every V row active, with the linear rows */
+  int rows;           /* V rows */
+  double tol, feasibility_tol, screen, deadline;
+  nehmo_daqp_quadprog quadprog;
+  void* settings;
+} nehmo_solve_args;
+
+/* One answer of the screened iterations. */
+typedef struct {
+  int status, iterations, qp_flag;
+  double y[NEHMO_MAX_N];
+  double B[NEHMO_MAX_N * NEHMO_MAX_N];  /* the Hessian estimate, when status is optimal */
+  double c[NEHMO_MAX_M];                /* every row (NaN: not evaluated at y) */
+} nehmo_answer;
+
+/* sqp._screened: the iterations from `start` on the V rows where keep (the linear rows always),
+ * adding the rows a solution breaks (or brings below screen) until it holds them all.
+ * start_c/start_J: every row's values at start, or NULL. */
+static int nehmo_screened(const nehmo_solve_args* a, const double* start, const double* start_c,
+                          const double* start_J, const double* B0, const unsigned char* keep0,
+                          int max_iter, nehmo_answer* out) {
+  const int n = a->prob.n, rows = a->rows, nlin = a->prob.nlin, all = rows + nlin;
+  unsigned char keep[NEHMO_MAX_M], rest[NEHMO_MAX_M];
+  double c[NEHMO_MAX_M], J[NEHMO_MAX_M * NEHMO_MAX_N], other[NEHMO_MAX_M];
+  int used = 0;
+  memcpy(keep, keep0, (size_t)rows);
+  memcpy(out->y, start, sizeof(double) * n);
+  memcpy(out->B, B0, sizeof(double) * n * n);
+  for (;;) {
+    nehmo_problem prob = a->prob;
+    int kept = 0, carried = 0, it = 0, flag = 0, status, evaluated = 0, broken = 0;
+    for (int i = 0; i < rows; ++i) kept += keep[i];
+    prob.m = kept + nlin;
+    prob.active = kept == rows ? NULL : keep;
+    if (start_c) { /* the carried rows' values at the start, packed */
+      for (int i = 0; i < all; ++i) {
+        if (i < rows && !keep[i]) continue;
+        c[carried] = start_c[i];
+        memcpy(J + (size_t)carried * n, start_J + (size_t)i * n, sizeof(double) * n);
+        ++carried;
+      }
+      evaluated = 1;
+      start_c = NULL; /* a later round starts at the solution, not at start */
+    }
+    status = nehmo_iterate(&prob, out->y, out->B, c, J, evaluated, a->tol, a->feasibility_tol,
+                           max_iter - used, a->deadline, a->quadprog, a->settings, &it, &flag);
+    used += it;
+    out->iterations = used;
+    out->qp_flag = flag;
+    /* every row's value: the carried ones from the iterations, NaN for the others */
+    carried = 0;
+    for (int i = 0; i < all; ++i) out->c[i] = (i >= rows || keep[i]) ? c[carried++] : NAN;
+    if (status != NEHMO_OPTIMAL || kept == rows) return out->status = status;
+    /* the rows screened out, at the solution */
+    for (int i = 0; i < rows; ++i) rest[i] = !keep[i];
+    prob.active = rest;
+    prob.m = rows - kept;
+    prob.nlin = 0;
+    if (nehmo_evaluate(&prob, out->y, other, J)) return out->status = NEHMO_EVAL_ERROR;
+    carried = 0;
+    for (int i = 0; i < rows; ++i) {
+      if (keep[i]) continue;
+      out->c[i] = other[carried++];
+      broken |= out->c[i] < -a->feasibility_tol;
+    }
+    if (!broken) return out->status = NEHMO_OPTIMAL;
+    if (used >= max_iter) return out->status = NEHMO_ITERATION_LIMIT;
+    for (int i = 0; i < rows; ++i) keep[i] |= out->c[i] < a->screen;
+  }
+}
+
+static int nehmo_same(const double* a, const double* b, int n) {
+  for (int j = 0; j < n; ++j)
+    if (a[j] != b[j]) return 0;
+  return 1;
+}
+
+/* sqp.solve_sqp after its naive-step check, in one call: the screened iterations from y_start
+ * (already in the box) with Hessian estimate B0, then, while they end infeasible, again from the
+ * naive step (its rows' values c_naive, J_naive at hand) and from y = 0, each once unless tried.
+ * keep: the V rows carried at first. Outputs: y, c (rows + nlin; NaN where not evaluated), B
+ * (the Hessian estimate when optimal), iterations and the last QP flag. */
+int nehmo_sqp_solve(int n, int rows, const double* error0, double ymax, double tau, double eps,
+                    int ngroups, nehmo_group* groups, int nlin, const double* A,
+                    const double* b, const double* y_start, const double* naive,
+                    const double* c_naive, const double* J_naive, const double* B0,
+                    const unsigned char* keep, double screen, double tol,
+                    double feasibility_tol, int max_iter, double deadline,
+                    nehmo_daqp_quadprog quadprog, void* settings, double* y, double* c,
+                    double* B, int* iterations, int* qp_flag) {
+  nehmo_solve_args a = {{n, rows + nlin, ngroups, nlin, error0, ymax, tau, eps, groups, A, b,
+                         NULL},
+                        rows, tol, feasibility_tol, screen, deadline, quadprog, settings};
+  const double zero[NEHMO_MAX_N] = {0.0};
+  const double* tried[3];
+  int ntried = 1;
+  nehmo_answer out;
+  *iterations = 0;
+  *qp_flag = 0;
+  if (n > NEHMO_MAX_N || rows + nlin > NEHMO_MAX_M) return NEHMO_FAILED;
+  tried[0] = y_start;
+  nehmo_screened(&a, y_start, nehmo_same(y_start, naive, n) ? c_naive : NULL,
+                 J_naive, B0, keep, max_iter, &out);
+  for (int k = 0; k < 2; ++k) {
+    const double* start = k == 0 ? naive : zero;
+    int used = out.iterations, seen = 0;
+    if (out.status != NEHMO_INFEASIBLE || used >= max_iter) break;
+    for (int t = 0; t < ntried; ++t) seen |= nehmo_same(start, tried[t], n);
+    if (seen) continue;
+    tried[ntried++] = start;
+    nehmo_screened(&a, start, nehmo_same(start, naive, n) ? c_naive : NULL, J_naive, B0, keep,
+                   max_iter - used, &out);
+    out.iterations += used;
+  }
+  memcpy(y, out.y, sizeof(double) * n);
+  memcpy(c, out.c, sizeof(double) * (rows + nlin));
+  if (out.status == NEHMO_OPTIMAL) memcpy(B, out.B, sizeof(double) * n * n);
+  *iterations = out.iterations;
+  *qp_flag = out.qp_flag;
+  return out.status;
 }
