@@ -6,7 +6,9 @@ BFGS, line search). The C loop calls the pair models' generated V/∇V functions
 point (``daqp_quadprog``, exported by the installed ``daqp`` module) directly, so an iteration
 costs little more than its evaluation: on 79 constrained dual-UR5 problems from closed loops,
 a solve took 0.76 ms at the median and 1.03 ms at p95 against 1.03 and 1.53 ms in Python, with
-the same statuses and iteration counts and steps within 1e-12 rad.
+the same statuses and iteration counts and steps within 1e-12 rad. The screening rounds and the
+restarts of :func:`.sqp.solve_sqp` run in the same call (``nehmo_sqp_solve``): each round or
+restart through Python cost ~0.05–0.1 ms of its own, as much as an evaluation.
 
 The C file is compiled with the system compiler once and cached beside the generated model
 code (:mod:`.codegen`). Loading checks DAQP's C interface against ``daqp.solve`` on a few QPs
@@ -19,9 +21,10 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import subprocess
+import threading
 import warnings
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 from typing import cast
@@ -85,6 +88,35 @@ class _ModelHandle:
     arg: np.ndarray  # sz_arg pointer slots
     res: np.ndarray  # sz_res pointer slots
 
+    addresses: tuple[int, ...] = field(init=False)  # of iw, w, x, g, arg, res
+
+    def __post_init__(self) -> None:
+        # read once: each ``.ctypes.data`` costs about a microsecond
+        arrays = (self.iw, self.w, self.x, self.g, self.arg, self.res)
+        self.addresses = tuple(a.ctypes.data for a in arrays)
+
+
+class _SolveBuffers:
+    """The arrays ``nehmo_sqp_solve`` reads and writes, allocated once at the C loop's sizes
+    (their addresses too): a solve copies its inputs in rather than converting each one."""
+
+    def __init__(self) -> None:
+        n, m = MAX_N, MAX_M
+        self.vectors = np.zeros((6, n))  # error0, start, naive, y (out) and two spare
+        self.c0, self.c = np.zeros(m), np.zeros(m)
+        self.J0 = np.zeros(m * n)
+        self.B0, self.B = np.zeros(n * n), np.zeros(n * n)
+        self.keep = np.zeros(m, dtype=np.uint8)
+        self.ints = (ctypes.c_int * 2)()  # iterations, QP flag
+        rows = self.vectors.ctypes.data
+        self.e0_at, self.start_at, self.naive_at, self.y_at = (rows + 8 * n * i for i in range(4))
+        self.c0_at, self.c_at = self.c0.ctypes.data, self.c.ctypes.data
+        self.J0_at = self.J0.ctypes.data
+        self.B0_at, self.B_at = self.B0.ctypes.data, self.B.ctypes.data
+        self.keep_at = self.keep.ctypes.data
+        self.ints_at = ctypes.addressof(self.ints)
+        self.flag_at = self.ints_at + ctypes.sizeof(ctypes.c_int)
+
 
 class NativeLoop:
     """The loaded C loop, DAQP's C entry point and its default settings.
@@ -99,6 +131,7 @@ class NativeLoop:
         self.quadprog = ctypes.cast(dq.daqp_quadprog, _P).value
         self.settings = ctypes.create_string_buffer(1024)  # DAQPSettings is ~150 bytes
         dq.daqp_default_settings(self.settings)
+        self.settings_at = ctypes.addressof(self.settings)
         self.iterate_fn = library.nehmo_sqp_iterate
         self.iterate_fn.restype = _I
         self.iterate_fn.argtypes = [_I, _I, _P, _D, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
@@ -113,6 +146,7 @@ class NativeLoop:
         self._models: weakref.WeakKeyDictionary[PairValueModel, _ModelHandle | None] = (
             weakref.WeakKeyDictionary()
         )
+        self._local = threading.local()  # per thread: its _SolveBuffers
 
     def qp(
         self,
@@ -182,12 +216,10 @@ class NativeLoop:
                 break
             states = np.ascontiguousarray(states, dtype=np.float64)
             alive.append(states)
-            slot.fn, slot.iw, slot.w = handle.fn, handle.iw.ctypes.data, handle.w.ctypes.data
-            slot.n, slot.k = states.shape[1], states.shape[0]
-            slot.states = states.ctypes.data
-            slot.x, slot.g = handle.x.ctypes.data, handle.g.ctypes.data
-            slot.arg, slot.res = handle.arg.ctypes.data, handle.res.ctypes.data
-            m += states.shape[0]
+            k, n_state = states.shape
+            slot.fn, slot.n, slot.k, slot.states = handle.fn, n_state, k, states.ctypes.data
+            slot.iw, slot.w, slot.x, slot.g, slot.arg, slot.res = handle.addresses
+            m += k
         else:
             nlin, A, b = 0, None, None
             if linear is not None:
@@ -280,21 +312,23 @@ class NativeLoop:
         prepared = self._prepare(problem)
         if prepared is None:
             return None
-        n, rows = len(y_start), problem.constraints.value_count
-        e0 = np.ascontiguousarray(problem.error0, dtype=np.float64)
-        start = np.ascontiguousarray(y_start, dtype=np.float64)
-        naive = np.ascontiguousarray(naive, dtype=np.float64)
-        c0 = np.ascontiguousarray(naive_values[0], dtype=np.float64)
-        J0 = np.ascontiguousarray(naive_values[1], dtype=np.float64)
-        B0 = np.ascontiguousarray(B, dtype=np.float64)
-        keep8 = np.ascontiguousarray(keep, dtype=np.uint8)
-        y, c, B_out = np.empty(n), np.empty(prepared.m), np.empty((n, n))
-        iterations, flag = ctypes.c_int(), ctypes.c_int()
+        io = getattr(self._local, "io", None)
+        if io is None:
+            io = self._local.io = _SolveBuffers()
+        n, m = len(y_start), prepared.m
+        rows = problem.constraints.value_count
+        io.vectors[0, :n] = problem.error0
+        io.vectors[1, :n] = y_start
+        io.vectors[2, :n] = naive
+        io.c0[:m] = naive_values[0]
+        io.J0[: m * n] = naive_values[1].reshape(-1)
+        io.B0[: n * n] = B.reshape(-1)
+        io.keep[:rows] = keep
         tau, eps, ngroups, groups, nlin, A, b = prepared.fixed
         code = self.solve_fn(
             n,
             rows,
-            e0.ctypes.data,
+            io.e0_at,
             problem.y_max,
             tau,
             eps,
@@ -303,29 +337,30 @@ class NativeLoop:
             nlin,
             A,
             b,
-            start.ctypes.data,
-            naive.ctypes.data,
-            c0.ctypes.data,
-            J0.ctypes.data,
-            B0.ctypes.data,
-            keep8.ctypes.data,
+            io.start_at,
+            io.naive_at,
+            io.c0_at,
+            io.J0_at,
+            io.B0_at,
+            io.keep_at,
             np.inf if screen is None else screen,
             tol,
             feasibility_tol,
             max_iter,
             deadline,
             self.quadprog,
-            ctypes.addressof(self.settings),
-            y.ctypes.data,
-            c.ctypes.data,
-            B_out.ctypes.data,
-            ctypes.byref(iterations),
-            ctypes.byref(flag),
+            self.settings_at,
+            io.y_at,
+            io.c_at,
+            io.B_at,
+            io.ints_at,
+            io.flag_at,
         )
         if code == 5:
             raise NehmoError("evaluation of a pair model's V/∇V failed in the SQP loop")
-        hessian = B_out if code == 0 else None
-        return STATUSES[code], iterations.value, y, c, hessian, flag.value
+        hessian = io.B[: n * n].reshape(n, n).copy() if code == 0 else None
+        y, c = io.vectors[3, :n].copy(), io.c[:m].copy()
+        return STATUSES[code], io.ints[0], y, c, hessian, io.ints[1]
 
 
 def _check(native: NativeLoop) -> str | None:

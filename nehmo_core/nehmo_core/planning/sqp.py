@@ -11,8 +11,9 @@
    ``infeasible`` when a linearization has no feasible point (after starting again from the
    naive step and from ``y = 0``) and ``timeout`` when the deadline passes.
 
-The iterations run in C (:mod:`.native`) when every pair model has generated code; the Python
-loop below is the same algorithm and the fallback.
+After the naive-step check, the whole solve (screened iterations and restarts) runs in one C
+call (:mod:`.native`) when every pair model has generated code; the Python code below is the
+same algorithm and the fallback.
 """
 
 from __future__ import annotations
@@ -126,9 +127,9 @@ def solve_sqp(
     now below ``screen``) and the iterations go on from there. The answer is therefore a KKT
     point of the whole problem, as without screening. ``None`` carries every row throughout.
 
-    ``native``: run the iterations in C (:mod:`.native`) when every pair model has generated
-    code and a compiler works; the same algorithm as the Python loop, so the same answers up to
-    rounding. ``False`` forces the Python loop.
+    ``native``: run the solve after the naive-step check in C (:mod:`.native`) when every pair
+    model has generated code and a compiler works; the same algorithm as the Python loop, so the
+    same answers up to rounding. ``False`` forces the Python loop.
     """
     cons = problem.constraints
     naive = problem.naive_step()

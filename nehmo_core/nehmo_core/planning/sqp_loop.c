@@ -1,4 +1,6 @@
-/* The SQP iterations of nehmo_core.planning.sqp._iterate, in C.
+/* The SQP of nehmo_core.planning.sqp in C: the iterations of _iterate (nehmo_sqp_iterate) and
+ * the rest of solve_sqp after its naive-step check, screening rounds and restarts included
+ * (nehmo_sqp_solve).
  *
  * Same algorithm, step for step: linearize, solve the QP with DAQP (through the C entry point
  * of the installed daqp module), backtrack on the l1 merit function, damped BFGS. The value
