@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 import re
+import threading
 import time
 from dataclasses import replace
 
@@ -406,14 +407,19 @@ def test_c_loop_returns_the_python_loops_answers(model) -> None:
     assert "optimal" in statuses
 
 
-def test_c_loop_evaluates_several_models_like_the_python_loop(model) -> None:
-    """Peers split between two pair models (two groups of rows, two generated functions)."""
-    other = PairValueModel.from_value_function(
+@pytest.fixture(scope="module")
+def other(model) -> PairValueModel:
+    """A second pair model for the same pair (other random weights)."""
+    return PairValueModel.from_value_function(
         random_value_function(
             "ur5_ur5", "bc+sym", NetworkSettings(width=64, hidden_layers=2), seed=1
         ),
         "test_opt_bcsym_seed1",
     )
+
+
+def test_c_loop_evaluates_several_models_like_the_python_loop(model, other) -> None:
+    """Peers split between two pair models (two groups of rows, two generated functions)."""
     loop = native.loop()
     assert loop is not None and loop.model(model) is not None and loop.model(other) is not None
     optimal = 0
@@ -429,6 +435,29 @@ def test_c_loop_evaluates_several_models_like_the_python_loop(model) -> None:
             _assert_same_solve(solve_sqp(split, np.zeros(6), screen=screen), py)
             optimal += py.status == "optimal"
     assert optimal >= 4
+
+
+def test_c_solves_in_two_threads_get_the_answers_they_get_alone(model, other) -> None:
+    """ctypes lets go of the interpreter lock during a C solve, so two planners (each with its
+    own pair model) may solve at the same time in two threads: each thread has its own input and
+    output buffers, and every answer equals the one the same solve gives alone."""
+    problems = {"a": _multi_peer_problems(model, 31, 6), "b": _multi_peer_problems(other, 32, 6)}
+    alone = {k: [solve_sqp(p, np.zeros(6)) for p in ps] for k, ps in problems.items()}
+    assert any(r.status == "optimal" for rs in alone.values() for r in rs)
+    answers: dict[str, list[SolveResult]] = {}
+
+    def run(key: str) -> None:
+        answers[key] = [solve_sqp(p, np.zeros(6)) for _ in range(40) for p in problems[key]]
+
+    threads = [threading.Thread(target=run, args=(key,)) for key in problems]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    for key, results in answers.items():
+        assert len(results) == 40 * len(problems[key])
+        for i, result in enumerate(results):
+            _assert_same_solve(result, alone[key][i % len(problems[key])])
 
 
 def test_c_loop_steps_aside_for_models_without_generated_code(model) -> None:
