@@ -250,3 +250,25 @@ def test_cli_resume_without_a_checkpoint_is_an_error(
     assert exit_info.value.code == 2
     assert "holds no checkpoint to --resume from" in capsys.readouterr().err
     assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "expected"),
+    [
+        ("--lr", "-1", "`--lr` must be > 0"),
+        ("--lr-final", "3", "`--lr-final` must lie in (0, 1]"),
+        ("--width", "0", "`--width` must be >= 1"),
+        ("--batch-size", "0", "`--batch-size` must be > 0"),
+        ("--samples", "1.5", "`--samples` must be a positive whole count"),
+    ],
+)
+def test_cli_errors_name_the_option_typed(
+    tmp_path: Path, capsys: pytest.CaptureFixture, option: str, value: str, expected: str
+) -> None:
+    """A bad value is reported under the option the user typed, not the settings field."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--system", "air3d", "--out", str(tmp_path / "x"), f"{option}={value}"])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert expected in err, err
+    assert not (tmp_path / "x").exists()

@@ -91,3 +91,29 @@ def test_bad_ros_arguments_stop_the_node_with_one_line(
     assert len(lines) == 1, proc.stderr
     assert lines[0].startswith(f"{program}: error: ") and expected in lines[0], lines[0]
     assert "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize(
+    ("module", "program", "parameter"),
+    [
+        ("nehmo_ros.arm_planner", "arm_planner", "arm_id"),
+        ("nehmo_ros.recorder", "recorder", "output"),
+        ("sim_bridge.bridge", "sim_bridge", "physics_rate"),
+    ],
+)
+def test_help_prints_the_nodes_usage(module: str, program: str, parameter: str) -> None:
+    """``--help`` (before ``--ros-args``) prints the node's usage and parameters, not an error
+    about a missing parameter; after ``--ros-args`` it is an unknown ROS argument."""
+    proc = subprocess.run(
+        [sys.executable, "-m", module, "--help"],
+        env=child_env(),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith(f"`{program}` node:"), proc.stdout[:200]
+    assert f"``{parameter}``" in proc.stdout
+    late = [sys.executable, "-m", module, "--ros-args", "--help"]
+    proc = subprocess.run(late, env=child_env(), capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "unknown ROS argument '--help'" in proc.stderr

@@ -6,7 +6,8 @@ ROS nodes) can catch one class and print one clear line instead of a traceback.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 
 
 class NehmoError(Exception):
@@ -38,3 +39,16 @@ class InvalidValueError(NehmoError, ValueError):
 
 class ModelFileError(NehmoError):
     """A robot description or trained model file that is missing, corrupted or mismatched."""
+
+
+@contextmanager
+def as_options(options: Mapping[str, str]) -> Iterator[None]:
+    """Re-raise an :class:`InvalidValueError` about a settings field under the command-line
+    option that set it (``options`` maps field names to option names, e.g. ``learning_rate``
+    to ``--lr``), so the message names what the user typed."""
+    try:
+        yield
+    except InvalidValueError as exc:
+        if exc.parameter not in options:
+            raise
+        raise InvalidValueError(options[exc.parameter], exc.rule, exc.value) from None

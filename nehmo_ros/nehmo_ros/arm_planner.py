@@ -342,7 +342,7 @@ class ArmPlannerNode:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `arm_planner` console script."""
     sys.setswitchinterval(5e-4)  # the timer thread gets the GIL back from the solver quickly
-    return run_main("arm_planner", ArmPlannerNode, argv)
+    return run_main("arm_planner", ArmPlannerNode, argv, usage=__doc__)
 
 
 if __name__ == "__main__":

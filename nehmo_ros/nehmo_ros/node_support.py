@@ -81,12 +81,19 @@ def run_main(
     argv: Sequence[str] | None,
     executor: Any | None = None,
     drain_s: float = 0.0,
+    usage: str | None = None,
 ) -> int:
     """Init the middleware, build the node, spin until SIGINT/SIGTERM, stop cleanly.
 
     After the stop request the node spins ``drain_s`` more seconds (taking what is queued),
-    then ``on_stop`` runs while the middleware is still up.
+    then ``on_stop`` runs while the middleware is still up. ``-h``/``--help`` among the
+    arguments before ``--ros-args`` prints ``usage`` (the node module's docstring) instead.
     """
+    args = list(sys.argv[1:] if argv is None else argv)
+    own = args[: args.index("--ros-args")] if "--ros-args" in args else args
+    if usage is not None and ("-h" in own or "--help" in own):
+        print(usage.strip(), flush=True)
+        return 0
     try:
         try:
             ros.init(args=None if argv is None else [program, *argv])  # --ros-args, domain id

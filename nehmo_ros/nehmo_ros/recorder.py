@@ -197,7 +197,7 @@ class RecorderNode:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `recorder` console script."""
-    return run_main("recorder", RecorderNode, argv, drain_s=0.3)
+    return run_main("recorder", RecorderNode, argv, drain_s=0.3, usage=__doc__)
 
 
 if __name__ == "__main__":

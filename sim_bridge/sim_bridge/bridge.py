@@ -471,7 +471,7 @@ class SimBridgeNode:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `sim_bridge` console script."""
-    return run_main("sim_bridge", SimBridgeNode, argv)
+    return run_main("sim_bridge", SimBridgeNode, argv, usage=__doc__)
 
 
 if __name__ == "__main__":

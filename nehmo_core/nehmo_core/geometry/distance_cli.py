@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from nehmo_core.errors import InvalidValueError, ModelFileError
+from nehmo_core.errors import InvalidValueError, ModelFileError, as_options
 from nehmo_core.geometry.distance_data import PAIRS, DatasetSpec, generate
 from nehmo_core.geometry.distance_model import MODELS_DIR, load_distance_file
 from nehmo_core.geometry.distance_train import (
@@ -19,21 +19,18 @@ from nehmo_core.geometry.distance_train import (
     evaluate,
     train,
 )
+from nehmo_core.hjr.train import parse_count
 
-
-def _count(text: str) -> int:
-    """Parse counts like ``300k`` or ``2M``."""
-    t = text.strip().lower()
-    mult = {"k": 1_000, "m": 1_000_000}.get(t[-1:], 1)
-    return int(float(t[:-1] if mult > 1 else t) * mult)
+_GENERATE_OPTIONS = {"n_uniform": "--uniform", "n_boundary": "--boundary"}
+_TRAIN_OPTIONS = {"epochs": "--epochs", "seed": "--seed", "hidden": "--hidden"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", required=True)
     g = sub.add_parser("generate", help="sample joint pairs and label them with exact distances")
     g.add_argument("--pair", choices=sorted(PAIRS), required=True)
-    g.add_argument("--uniform", type=_count, default=300_000, help="uniform samples (e.g. 300k)")
-    g.add_argument("--boundary", type=_count, default=500_000, help="near-contact samples")
+    g.add_argument("--uniform", default="300k", help="uniform samples (e.g. 300k, 0: none)")
+    g.add_argument("--boundary", default="500k", help="near-contact samples (e.g. 500k, 0: none)")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--workers", type=int, default=2)
     g.add_argument("--out", type=Path, required=True, help="output .npz file")
@@ -62,9 +59,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.action == "generate":
-        spec = DatasetSpec(args.pair, args.uniform, args.boundary, args.seed)
-        t0 = time.perf_counter()
-        q, d = generate(spec, workers=args.workers)
+        with as_options(_GENERATE_OPTIONS):
+            spec = DatasetSpec(
+                args.pair,
+                parse_count(args.uniform, "--uniform", minimum=0),
+                parse_count(args.boundary, "--boundary", minimum=0),
+                args.seed,
+            )
+            if args.workers < 1:
+                raise InvalidValueError("--workers", "must be >= 1", args.workers)
+            t0 = time.perf_counter()
+            q, d = generate(spec, workers=args.workers)
         wall = time.perf_counter() - t0
         args.out.parent.mkdir(parents=True, exist_ok=True)
         meta = {"spec": spec.__dict__, "wall_time_s": wall, "n": len(d)}
@@ -126,7 +131,8 @@ def _train(args: argparse.Namespace) -> int:
         raise InvalidValueError(
             "--hidden", "must be comma-separated integers", args.hidden
         ) from None
-    settings = DistanceTrainSettings(hidden=hidden, epochs=args.epochs, seed=args.seed)
+    with as_options(_TRAIN_OPTIONS):
+        settings = DistanceTrainSettings(hidden=hidden, epochs=args.epochs, seed=args.seed)
     q, d, meta = load_dataset(args.data)
     model, summary = train(args.pair, q, d, settings)
     card: dict[str, object] = {

@@ -64,6 +64,10 @@ class DatasetSpec:
         for name in ("n_uniform", "n_boundary"):
             if getattr(self, name) < 0:
                 raise InvalidValueError(name, "must be >= 0", getattr(self, name))
+        if self.n_uniform + self.n_boundary == 0:
+            raise InvalidValueError(
+                "n_uniform", "must be > 0 when no boundary samples are asked for", 0
+            )
 
 
 _WORLD: tuple[CellWorld, str, str] | None = None

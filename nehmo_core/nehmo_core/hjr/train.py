@@ -42,7 +42,13 @@ import torch
 from torch import Tensor
 
 import nehmo_core
-from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError, UnknownNameError
+from nehmo_core.errors import (
+    InvalidValueError,
+    ModelFileError,
+    NehmoError,
+    UnknownNameError,
+    as_options,
+)
 from nehmo_core.hjr.networks import NetworkSettings, ValueFunction, ValueNetwork, check_variant
 from nehmo_core.hjr.systems import HJISystem, make_system, system_names
 
@@ -653,14 +659,16 @@ def _progress_bar(enabled: bool, schedule: Schedule, step: int, name: str, varia
 _SUFFIXES = {"": 1, "k": 1_000, "m": 1_000_000, "g": 1_000_000_000}
 
 
-def parse_count(text: str, parameter: str = "samples") -> int:
-    """Parse ``"40M"``, ``"500k"``, ``"2e6"`` or ``"20000"`` into a positive integer."""
+def parse_count(text: str, parameter: str = "samples", minimum: int = 1) -> int:
+    """Parse ``"40M"``, ``"500k"``, ``"2e6"`` or ``"20000"`` into a whole count of at least
+    ``minimum`` (1: positive; 0: zero allowed)."""
     match = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([kKmMgG]?)\s*", text)
     if match is None:
         raise InvalidValueError(parameter, "must be a count like 40M, 500k or 2e6", text)
     value = float(match.group(1)) * _SUFFIXES[match.group(2).lower()]
-    if value < 1 or value != int(value):
-        raise InvalidValueError(parameter, "must be a positive whole count", text)
+    if value < minimum or value != int(value):
+        rule = "a positive whole count" if minimum == 1 else f"a whole count >= {minimum}"
+        raise InvalidValueError(parameter, f"must be {rule}", text)
     return int(value)
 
 
@@ -685,8 +693,31 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
+_OPTIONS = {
+    "variant": "--variant",
+    "samples": "--samples",
+    "seed": "--seed",
+    "preset": "--preset",
+    "width": "--width",
+    "hidden_layers": "--hidden-layers",
+    "batch_size": "--batch-size",
+    "learning_rate": "--lr",
+    "lr_schedule": "--lr-schedule",
+    "lr_final_fraction": "--lr-final",
+    "dirichlet_loss": "--dirichlet-loss",
+    "checkpoint_every": "--checkpoint-every",
+}
+"""``TrainSettings`` fields set from the command line, and their options (for error messages)."""
+
+
 def settings_from_args(args: argparse.Namespace) -> TrainSettings:
-    """Build :class:`TrainSettings` from parsed ``nehmo train`` arguments."""
+    """Build :class:`TrainSettings` from parsed ``nehmo train`` arguments; a bad value is
+    reported under the option that set it."""
+    with as_options(_OPTIONS):
+        return _settings_from_args(args)
+
+
+def _settings_from_args(args: argparse.Namespace) -> TrainSettings:
     base = TrainSettings.preset(args.preset)
     net = base.network
     if args.width is not None:
