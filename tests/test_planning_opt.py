@@ -833,3 +833,27 @@ def test_whole_counts_and_seeds_are_accepted() -> None:
     s = PlannerSettings(sqp_max_iter=1, stall_ticks=3, escape_seed=0, self_safety=0.0)
     assert (s.sqp_max_iter, s.stall_ticks, s.escape_seed, s.self_safety) == (1, 3, 0, 0.0)
     assert PlannerSettings(escape_seed=2**40).escape_seed == 2**40
+
+
+def test_the_fail_safe_and_the_solve_of_one_state_share_one_evaluation(model) -> None:
+    """A node asks for the fail-safe ahead of each solve from the same state: the solve reuses
+    that evaluation of V at t_plan and answers as a planner that was not asked first."""
+    planner, fresh = NehmoPlanner(CELL, OWN, [model]), NehmoPlanner(CELL, OWN, [model])
+    q1, q2, goal = _near_contact(model, 8, 1)[0]
+    evaluations = []
+    evaluate = planner._evaluate_current
+
+    def counted(*args):  # type: ignore[no-untyped-def]
+        evaluations.append(args)
+        return evaluate(*args)
+
+    planner._evaluate_current = counted  # type: ignore[method-assign]
+    planner.fail_safe(q1, {PEER: q2})
+    first = planner.plan(q1, {PEER: q2}, goal)
+    assert len(evaluations) == 1
+    alone = fresh.plan(q1, {PEER: q2}, goal)
+    np.testing.assert_array_equal(first.velocity, alone.velocity)
+    assert first.telemetry.status == alone.telemetry.status
+    planner.plan(q1, {PEER: q2 + 0.01}, goal)  # the peer moved: a new state
+    planner.plan(q1 + 0.01, {PEER: q2 + 0.01}, goal)  # this arm moved
+    assert len(evaluations) == 3

@@ -183,6 +183,7 @@ class NehmoPlanner:
         return project_step(t * u, rows, t * self.settings.u_max) / t
 
     def reset(self) -> None:
+        self._last_current: tuple[object, _Peers] | None = None  # see _current
         self._warm = np.zeros(self.robot.dof)
         self._hessian: np.ndarray | None = None  # the last solve's Lagrangian Hessian estimate
         seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape_seed
@@ -253,7 +254,20 @@ class NehmoPlanner:
     def _current(
         self, q: np.ndarray, peers: Mapping[str, np.ndarray], only_known: bool = False
     ) -> _Peers:
+        """The constrained peers' pair states, ``V`` and ``∇V`` at ``τ = t_plan`` now. The last
+        answer is kept: a node asks for the fail-safe ahead of each solve from the same state,
+        and the solve then reuses its evaluation."""
         ids = [p for p in self.pairs if p in peers] if only_known else list(self.pairs)
+        key = (q.tobytes(), tuple((p, peers[p].tobytes()) for p in ids))
+        if self._last_current is not None and self._last_current[0] == key:
+            return self._last_current[1]
+        now = self._evaluate_current(q, peers, ids)
+        self._last_current = (key, now)
+        return now
+
+    def _evaluate_current(
+        self, q: np.ndarray, peers: Mapping[str, np.ndarray], ids: list[str]
+    ) -> _Peers:
         index = [self.pairs[p].model_index for p in ids]
         states = [self.pairs[p].state(q, peers[p]) for p in ids]
         values = np.empty(len(ids))
