@@ -102,7 +102,7 @@ class _SolveBuffers:
 
     def __init__(self) -> None:
         n, m = MAX_N, MAX_M
-        self.vectors = np.zeros((6, n))  # error0, start, naive, y (out) and two spare
+        self.vectors = np.zeros((4, n))  # error0, start, naive and y (out)
         self.c0, self.c = np.zeros(m), np.zeros(m)
         self.J0 = np.zeros(m * n)
         self.B0, self.B = np.zeros(n * n), np.zeros(n * n)
@@ -121,8 +121,9 @@ class _SolveBuffers:
 class NativeLoop:
     """The loaded C loop, DAQP's C entry point and its default settings.
 
-    Not thread-safe: each pair model has one set of scratch arrays (as its buffered Python
-    evaluation has), so one planner's solves must not overlap."""
+    Each thread has its own solve buffers, but each pair model has one set of scratch arrays
+    (as its buffered Python evaluation has): solves that share a pair model must not overlap
+    (one planner's never do; planners in several threads need models of their own)."""
 
     def __init__(self, library: ctypes.CDLL) -> None:
         self.library = library
