@@ -77,6 +77,11 @@ def qp_step(
     return QPStep(np.asarray(p, dtype=np.float64), lam, int(flag))
 
 
+def _c_status(status: str, flag: int) -> str:
+    """A C loop's status, a failure with the QP exit flag that caused it."""
+    return f"failed (QP exit flag {flag})" if status == "failed" else status
+
+
 def _violation(c: np.ndarray) -> float:
     """Total constraint violation ``Σ max(0, −cᵢ)``."""
     return -float(c[c < 0.0].sum())
@@ -148,9 +153,7 @@ def solve_sqp(
         )
         if out is not None:
             status, iterations, y, c, hessian, flag = out
-            if status == "failed":
-                status = f"failed (QP exit flag {flag})"
-            return SolveResult(y, status, iterations, c, hessian)
+            return SolveResult(y, _c_status(status, flag), iterations, c, hessian)
     args = (tol, deadline, feasibility_tol, screen, native)
 
     def at(start: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -247,10 +250,8 @@ def _iterate(
         out = c_loop.iterate(problem, y, B, tol, max_iter, deadline, feasibility_tol, start_values)
         if out is not None:
             status, iterations, y, B, c, flag = out
-            if status == "failed":
-                status = f"failed (QP exit flag {flag})"
             hessian = B if status == "optimal" else None
-            return SolveResult(y, status, iterations, c, hessian)
+            return SolveResult(y, _c_status(status, flag), iterations, c, hessian)
     error0 = problem.error0
     c, J = cons.evaluate(y) if start_values is None else start_values
     rho = 1.0
