@@ -1,6 +1,6 @@
 """Do the planners hold 25 Hz? Three arms, the bridge and the recorder for 60 s of wall time.
 
-    python bench/ros_rate.py [--seconds 60] [--cell triple_ur5] [--model synthetic]
+    python bench/ros_rate.py [--seconds 60] [--cell triple_ur5] [--model shipped]
 
 Starts the node suite as separate processes (embedded runtime, loopback, own DDS domain) in
 real time (wall-clock stamps, no /clock), lets it run ``--seconds``, stops it with SIGINT and
@@ -160,7 +160,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--cell", default="triple_ur5")
-    parser.add_argument("--model", default="synthetic")
+    parser.add_argument("--model", default="shipped", help="shipped | synthetic | a path")
     parser.add_argument("--keep", help="directory for the log and the process outputs")
     args = parser.parse_args()
     out = Path(args.keep or tempfile.mkdtemp(prefix="ros_rate_"))

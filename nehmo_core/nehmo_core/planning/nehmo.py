@@ -314,7 +314,8 @@ class NehmoPlanner:
         arm's self-clearance rows); zero (hold) when no peer is constrained.
 
         Cheap (one value-and-gradient evaluation); a ROS node computes it ahead of each solve
-        so that a solve that overruns its tick still has a safe command to fall back on.
+        so that a solve that overruns its tick still has a safe command to fall back on (a solve
+        from the same state then reuses that evaluation).
         Peers missing from ``peers`` are left out (the caller decides what a missing peer means).
         """
         q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
