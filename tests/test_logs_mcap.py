@@ -205,7 +205,9 @@ def test_sigkill_writer_then_recover(tmp_path: Path) -> None:
     states = [r for r in records if r.topic == "/arm_a/joint_states"]
     lost = written - len(states)
     print(f"written {written}, recovered {len(states)}, lost {lost} (flush_every=20)")
-    assert 0 <= lost <= 20  # at most the messages since the last flush
+    # The kill can land after a write() returned but before the counter was updated, so one
+    # message more than counted may be on disk; at most the messages since the last flush are lost.
+    assert -1 <= lost <= 20
     assert read_scenario(fixed) == {"arms": ["arm_a"], "seed": 1}
     positions = [r.message.position[0] for r in states]  # type: ignore[union-attr]
     assert positions == pytest.approx([0.001 * i for i in range(len(states))])
