@@ -15,7 +15,9 @@ last columns say how often the two agree on status and iteration count and how f
 are apart. Where the default reports ``infeasible`` (the planner falls back to its fail-safe),
 IPOPT (tol 1e-8, up to 300 iterations, same warm start) tries the problem as well: the last
 column counts the steps where it finds a point satisfying every constraint within 1e-6 m, i.e.
-fail-safe steps that Opt did not need.
+fail-safe steps that Opt did not need. For scale, where the tight SQP is optimal IPOPT also
+solves the problem with the authors' settings (tol 1e-3, at most 30 iterations, from ``y = 0``):
+how far its answers are from the tight ones, where it reports success.
 """
 
 from __future__ import annotations
@@ -37,8 +39,9 @@ from planning_speed import CASES, _scenarios, far_models
 from nehmo_core.eval.planners import ModelRegistry
 from nehmo_core.hjr import load_value_function
 from nehmo_core.planning.ipopt_solver import IpoptSolver
-from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver
+from nehmo_core.planning.nehmo import NehmoPlanner, make_solver
 from nehmo_core.planning.opt import OptProblem
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.sqp import SolveResult, solve_sqp
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots import load_cell
@@ -50,8 +53,10 @@ class _Both:
     """The default solver, with the tight one run beside it on the measured arm's problems."""
 
     def __init__(self) -> None:
-        self.default = SqpSolver()
+        self.settings = PlannerSettings()
+        self.default = make_solver(self.settings)
         self.ipopt = IpoptSolver(tol=1e-8, max_iter=300)
+        self.authors = IpoptSolver(self.settings.ipopt_tol, self.settings.ipopt_max_iter)
         self.record = False
         self.rows: list[dict[str, Any]] = []
 
@@ -68,13 +73,28 @@ class _Both:
         if self.record:
             tight = solve_sqp(problem, y_start, 1e-9, 100, np.inf, hessian, screen=None)
             end = time.perf_counter()
-            python = solve_sqp(problem, y_start, hessian=hessian, native=False)
+            d = self.settings
+            python = solve_sqp(
+                problem,
+                y_start,
+                d.sqp_tol,
+                d.sqp_max_iter,
+                np.inf,
+                hessian,
+                screen=d.sqp_screen,
+                native=False,
+            )
             ipopt_found = None
             if fast.status == "infeasible":
                 ref = self.ipopt.solve(problem, y_start)
                 c, _ = problem.constraints.evaluate(ref.y)
                 ipopt_found = ref.status == "optimal" and float(c.min()) >= -1e-6
             both = fast.status == tight.status == "optimal"
+            authors_dy = None
+            if tight.status == "optimal":
+                theirs = self.authors.solve(problem, np.zeros_like(y_start))
+                if theirs.success:
+                    authors_dy = float(np.abs(theirs.y - tight.y).max())
             self.rows.append(
                 {
                     "fast": fast.status,
@@ -88,6 +108,8 @@ class _Both:
                     ),
                     "min_c": float(fast.constraint.min()) if fast.success else None,
                     "ipopt_found": ipopt_found,
+                    "authors_dy": authors_dy,
+                    "tight_optimal": tight.status == "optimal",
                     "python_same": python.status == fast.status
                     and python.iterations == fast.iterations,
                     "python_dy": float(np.abs(fast.y - python.y).max()),
@@ -120,6 +142,7 @@ def _cell(
     constrained = [r for r in rows if r["fast"] != "naive"]
     dy = np.array([r["dy"] for r in solved])
     dcost = np.array([r["dcost"] for r in solved])
+    theirs = np.array([r["authors_dy"] for r in rows if r["authors_dy"] is not None])
     t_fast = np.array([r["t_fast"] for r in constrained]) * 1e3
     t_tight = np.array([r["t_tight"] for r in constrained]) * 1e3
     return {
@@ -137,6 +160,13 @@ def _cell(
             "max": float(dy.max()),
         },
         "relative_cost_difference_max": float(dcost.max()),
+        "ipopt_authors_dy_rad": {
+            "tight_optimal": sum(r["tight_optimal"] for r in rows),
+            "ipopt_success": len(theirs),
+            "median": float(np.median(theirs)) if len(theirs) else None,
+            "p95": float(np.percentile(theirs, 95)) if len(theirs) else None,
+            "max": float(theirs.max()) if len(theirs) else None,
+        },
         "python_loop_same_status_and_iterations": sum(r["python_same"] for r in rows),
         "infeasible_steps": sum(r["fast"] == "infeasible" for r in rows),
         "infeasible_but_ipopt_solved": sum(bool(r["ipopt_found"]) for r in rows),
@@ -155,23 +185,31 @@ def markdown(report: dict[str, Any]) -> str:
     lines = [
         "# Default SQP against a tight one, on the same problems",
         "",
-        "Default: `sqp_tol` 1e-5 rad, `sqp_screen` 0.1 m. Tight: 1e-9 rad, every V row in every "
-        "iteration. Same problem, warm start and Hessian; the closed loop follows the default.",
+        f"Default: `sqp_tol` {report['sqp_tol']:g} rad, `sqp_screen` {report['sqp_screen']:g} m. "
+        "Tight: 1e-9 rad, every V row in every iteration. Same problem, warm start and Hessian; "
+        "the closed loop follows the default. IPOPT (authors): tol 1e-3, at most 30 iterations, "
+        "from y = 0, on the steps where the tight SQP is optimal.",
         "",
         "| cell (peers) | steps | statuses default / tight | both optimal | max joint difference "
         "median / p95 / max [rad] | max relative cost difference | min V − ε of default [m] "
+        "| IPOPT (authors) − tight: successes, max joint difference median / p95 / max [rad] "
         "| constrained solve ms, default median / p95 | tight median / p95 "
         "| C loop = Python loop (status and iterations) | max C − Python step difference [rad] "
         "| default infeasible: IPOPT finds a solution |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in report["cells"]:
         d, t = c["dy_rad"], c["constrained_solve_ms"]
         pairs = ", ".join(f"{k}: {n}" for k, n in c["status_pairs"].items())
+        a = c["ipopt_authors_dy_rad"]
+        authors = f"{a['ipopt_success']} of {a['tight_optimal']}"
+        if a["median"] is not None:
+            authors += f", {a['median']:.1e} / {a['p95']:.1e} / {a['max']:.1e}"
         lines.append(
             f"| {c['cell']} ({c['peers']}) | {c['steps']} | {pairs} | {c['both_optimal']} | "
             f"{d['median']:.1e} / {d['p95']:.1e} / {d['max']:.1e} | "
             f"{c['relative_cost_difference_max']:.1e} | {c['min_constraint_default']:.1e} | "
+            f"{authors} | "
             f"{t['default_median']:.2f} / {t['default_p95']:.2f} | "
             f"{t['tight_median']:.2f} / {t['tight_p95']:.2f} | "
             f"{c['python_loop_same_status_and_iterations']} of {c['steps']} | "
@@ -189,10 +227,13 @@ def main() -> None:
     torch.set_num_threads(1)
     vf = load_value_function("ur5_ur5", variant="bc+sym")
     model = PairValueModel.from_value_function(vf, "bench_ur5_ur5_bcsym")
+    defaults = PlannerSettings()
     report = {
+        "sqp_tol": defaults.sqp_tol,
+        "sqp_screen": defaults.sqp_screen,
         "cells": [
             _cell(cell_name, arm, model, args.scenarios, args.steps) for cell_name, arm, _ in CASES
-        ]
+        ],
     }
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "sqp_agreement.json").write_text(json.dumps(report, indent=2) + "\n")

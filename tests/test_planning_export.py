@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import platform
 from pathlib import Path
 
 import casadi as ca
@@ -237,3 +238,33 @@ def test_compiled_shipped_model_stores_each_weight_once_and_matches_the_vm(tmp_p
         (v, g), (v_ref, g_ref) = compiled(tau, xi), value_grad(tau, xi)
         np.testing.assert_allclose(float(v), float(v_ref), rtol=1e-12, atol=1e-14)
         np.testing.assert_allclose(np.asarray(g), np.asarray(g_ref), rtol=1e-10, atol=1e-12)
+
+
+def _transcendental_fn(name: str) -> ca.Function:
+    x = ca.MX.sym("x", 64)
+    y = ca.sum1(ca.sin(3.0 * x) * ca.exp(-x * x) + ca.cos(x))
+    return ca.Function(name, [x], [y, ca.gradient(y, x)])
+
+
+@pytest.mark.skipif(platform.machine() != "x86_64", reason="libmvec's vector ABI is x86-64's")
+def test_sin_cos_exp_loops_run_through_the_vector_math_library(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("NEHMO_CACHE", str(tmp_path))
+    fn = _transcendental_fn("vector_math")
+    compiled = compile_function(fn, "compiled")
+    assert compiled.library is not None
+    assert b"_ZGVdN4v_exp" in compiled.library.read_bytes()  # AVX2 variants, called per loop
+    for xi in np.random.default_rng(2).uniform(-3, 3, size=(5, 64)):
+        for a, b in zip(compiled.function.call([xi]), fn.call([xi]), strict=True):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-13, atol=1e-13)
+
+
+def test_a_failed_vector_math_build_falls_back_to_the_scalar_calls(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("NEHMO_CACHE", str(tmp_path))
+    monkeypatch.setattr(codegen, "VECTOR_MATH_FLAGS", ("-lno-such-library",))
+    fn = _transcendental_fn("scalar_math")
+    compiled = compile_function(fn, "compiled")
+    assert compiled.library is not None
+    assert b"_ZGV" not in compiled.library.read_bytes()
+    xi = np.linspace(-3, 3, 64)
+    for a, b in zip(compiled.function.call([xi]), fn.call([xi]), strict=True):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-13, atol=1e-13)

@@ -19,6 +19,7 @@ from nehmo_core.planning.baselines import NaivePlanner, TrajectoryTracker, retim
 from nehmo_core.planning.ipopt_solver import IpoptSolver
 from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver, make_solver
 from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
+from nehmo_core.planning.self_clearance import SelfClearanceRows
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.sqp import SolveResult, qp_step, solve_sqp
 from nehmo_core.planning.synthetic import random_value_function
@@ -151,6 +152,19 @@ def test_safe_unconstrained_step_equals_the_naive_step(model: PairValueModel) ->
     np.testing.assert_array_equal(result.velocity, naive.plan(q1, {}, goal).velocity)
 
 
+@pytest.mark.parametrize("in_c", [True, False])
+def test_a_nan_row_at_the_naive_step_is_not_taken_for_a_safe_one(model, in_c) -> None:
+    """A row that evaluates to NaN (here a linear row with a NaN bound; a network could
+    overflow) is not satisfied: the naive step is not returned, whatever the other rows say."""
+    planner = NehmoPlanner(CELL, OWN, [model])
+    q1 = np.array([0.0, -2.4, 1.5, -1.6, -1.5, 0.0])  # the V row far from active
+    problem = planner._problem(np.full(6, -0.01), planner._current(q1, {PEER: q1.copy()}))
+    assert solve_sqp(problem, np.zeros(6), native=in_c).status == "naive"
+    rows = SelfClearanceRows(np.eye(6)[:1], np.array([np.nan]), np.array([0.05]), (("a", "b"),))
+    poisoned = replace(problem, constraints=replace(problem.constraints, linear=rows))
+    assert solve_sqp(poisoned, np.zeros(6), native=in_c).status != "naive"
+
+
 def test_constraint_holds_at_the_solution_against_an_adversarial_peer(
     model: PairValueModel, value_function
 ) -> None:
@@ -185,10 +199,10 @@ def test_sqp_returns_the_ipopt_solution(model: PairValueModel) -> None:
         # IPOPT ends ~1e-8 inside the infeasible side of its bound; the costs agree to that.
         assert abs(problem.cost(fast.y) - problem.cost(ref.y)) <= 1e-6 * (1.0 + problem.cost(ref.y))
         assert fast.constraint.min() >= -1e-9
-        # the default tolerance (1e-5 rad on the last step) lands within it of the solution
-        default = solve_sqp(problem, np.zeros(6))
+        # the default tolerance (1e-4 rad on the last step) lands within it of the solution
+        default = solve_sqp(problem, np.zeros(6), tol=PlannerSettings().sqp_tol)
         assert default.status == "optimal"
-        np.testing.assert_allclose(default.y, fast.y, atol=1e-5)
+        np.testing.assert_allclose(default.y, fast.y, atol=PlannerSettings().sqp_tol)
         assert default.constraint.min() >= -1e-7
         compared += 1
     assert compared >= 5
@@ -230,11 +244,12 @@ def test_screened_sqp_returns_the_solution_of_the_whole_problem(
 ) -> None:
     """Rows far from active at the naive step are left out of the iterations and checked at the
     end; with a near-zero margin only the rows broken at the naive step are carried, so the
-    check must bring others back. Either way the answer is that of the whole problem."""
+    check must bring others back. Either way the answer is that of the whole problem. (tol 1e-8:
+    at 1e-9 an iteration count is at the mercy of rounding, e.g. of the vector math library.)"""
     rejoined = compared = 0
     for problem in _multi_peer_problems(model, 9, 80 if two_contacts else 40, two_contacts):
-        whole = solve_sqp(problem, np.zeros(6), tol=1e-9, screen=None)
-        screened = solve_sqp(problem, np.zeros(6), tol=1e-9, screen=screen)
+        whole = solve_sqp(problem, np.zeros(6), tol=1e-8, screen=None)
+        screened = solve_sqp(problem, np.zeros(6), tol=1e-8, screen=screen)
         assert screened.status == whole.status
         if whole.status != "optimal":
             continue
@@ -249,7 +264,7 @@ def test_screened_sqp_returns_the_solution_of_the_whole_problem(
         alone = solve_sqp(
             replace(problem, constraints=problem.constraints.subset(kept)),
             np.zeros(6),
-            tol=1e-9,
+            tol=1e-8,
             screen=None,
         )
         c_alone, _ = problem.constraints.evaluate(alone.y)
@@ -460,6 +475,18 @@ def test_c_solves_in_two_threads_get_the_answers_they_get_alone(model, other) ->
             _assert_same_solve(result, alone[key][i % len(problems[key])])
 
 
+def test_a_planner_loads_its_models_c_handles_before_its_first_tick(model) -> None:
+    """Building the C loop and loading a model's library take far longer than a tick: the
+    planner does both when it is made, not inside its first constrained tick's deadline."""
+    fresh = replace(model, _calls={})  # a model object the C loop has not seen
+    assert fresh not in native.loop()._models
+    NehmoPlanner(CELL, OWN, [fresh])
+    assert native.loop()._models[fresh] is not None
+    on_ipopt = replace(model, _calls={})
+    NehmoPlanner(CELL, OWN, [on_ipopt], PlannerSettings(solver="ipopt"))
+    assert on_ipopt not in native.loop()._models
+
+
 def test_c_loop_steps_aside_for_models_without_generated_code(model) -> None:
     """A model evaluated on CasADi's VM has no C function to call: the Python loop runs."""
     on_vm = replace(model, library=None)
@@ -487,6 +514,7 @@ def test_sqp_screen_setting_is_validated() -> None:
     with pytest.raises(InvalidValueError, match="sqp_screen"):
         PlannerSettings(sqp_screen=0.0)
     assert SqpSolver().screen == PlannerSettings().sqp_screen
+    assert SqpSolver().tol == PlannerSettings().sqp_tol
 
 
 def test_default_ipopt_settings_agree_with_sqp_within_their_tolerance(model) -> None:
@@ -631,6 +659,37 @@ def test_fail_safe_fires_on_solver_failure(model, value_function, solver, status
     _, grad = value_function.value_and_gradient(0.1, np.concatenate([q1, q2]))
     np.testing.assert_array_equal(result.velocity, 0.5 * np.sign(grad[:6]))
     assert result.telemetry.critical_peer == PEER
+
+
+class _Recording:
+    """The SQP, recording each call's start; fails the calls listed in ``fail``."""
+
+    def __init__(self, fail: set[int]) -> None:
+        self.fail, self.starts, self.naive = fail, [], []
+
+    def __call__(
+        self, problem: OptProblem, y_start: np.ndarray, deadline: float, hessian=None
+    ) -> SolveResult:
+        self.starts.append(y_start.copy())
+        self.naive.append(problem.naive_step())
+        if len(self.starts) - 1 in self.fail:
+            return SolveResult(np.zeros(6), "failed", 1, np.zeros(1))
+        return SqpSolver()(problem, y_start, np.inf, hessian)
+
+
+def test_a_solve_starts_at_the_last_solution_or_after_a_fail_safe_at_the_naive_step(model) -> None:
+    solver = _Recording(fail={1})
+    planner = NehmoPlanner(CELL, OWN, [model], solver=solver)
+    q1, q2, goal = _near_contact(model, 6, 1)[0]
+    results = []
+    for _ in range(4):
+        results.append(planner.plan(q1, {PEER: q2}, goal))
+        q1 = q1 + 0.1 * results[-1].velocity
+    assert [r.telemetry.fail_safe for r in results] == [False, True, False, False]
+    np.testing.assert_array_equal(solver.starts[0], solver.naive[0])  # after reset()
+    np.testing.assert_allclose(solver.starts[1], 0.1 * results[0].velocity, atol=1e-12)
+    np.testing.assert_array_equal(solver.starts[2], solver.naive[2])  # not the fail-safe's corner
+    np.testing.assert_allclose(solver.starts[3], 0.1 * results[2].velocity, atol=1e-12)
 
 
 def test_fail_safe_fires_on_a_missed_deadline(model, value_function) -> None:

@@ -22,6 +22,12 @@ networks train in float32, so their weights are), and multiplies through it with
 (one reads it transposed); the arithmetic stays double, so the results are those of the double
 code up to the summation order. A constant whose uses do not match the expected pattern is left
 as it is.
+
+Two smaller costs: the ~2000 ``sin``/``cos``/``exp`` of one evaluation (the SIREN's activations and
+their derivatives, the distance network's soft-min and layers) run four at a time through glibc's
+vector math library (libmvec, x86-64; elsewhere, or when it does not link, the scalar calls), and
+the ~60 4×4 products of the forward kinematics get a fixed-size path in the product kernel.
+Measured here on the shipped ``ur5_ur5`` value-and-gradient function: ~20–25 % faster together.
 """
 
 from __future__ import annotations
@@ -60,7 +66,7 @@ CFLAGS = (
     "-fPIC",
     "-shared",
 )
-_CODEGEN_VERSION = "3"
+_CODEGEN_VERSION = "4"
 
 _DENSE_KERNEL_HEAD = "void casadi_mtimes_dense(const casadi_real* x, casadi_int nrow_x"
 _DENSE_KERNEL = (
@@ -69,7 +75,15 @@ _DENSE_KERNEL = (
     const casadi_real* y, casadi_int ncol_y, casadi_real* z, casadi_int tr) {
   casadi_int i, j, k;
   casadi_real acc;
-  if (tr) {
+  if (!tr && nrow_x == 4 && ncol_x == 4 && ncol_y == 4) { /* homogeneous transforms: unrolled */
+    for (i=0; i<4; ++i) {
+      for (j=0; j<4; ++j) {
+        acc = 0;
+        for (k=0; k<4; ++k) acc += x[j + k*4] * y[k + i*4];
+        z[j + i*4] += acc;
+      }
+    }
+  } else if (tr) {
     for (i=0; i<ncol_y; ++i) {
       for (j=0; j<ncol_x; ++j) {
         acc = 0;
@@ -118,6 +132,27 @@ def _cpu() -> str:
         return platform.machine()
     keep = [ln for ln in lines if ln.startswith(("model name", "flags"))][:2]
     return platform.machine() + "|" + "|".join(keep)
+
+
+_MATH_INCLUDE = "#include <math.h>\n"
+_VECTOR_MATH = """#if defined(__x86_64__) && defined(__GLIBC__)
+/* libmvec's vector variants, so that loops over these vectorize */
+__attribute__((__simd__("notinbranch"))) extern double sin(double);
+__attribute__((__simd__("notinbranch"))) extern double cos(double);
+__attribute__((__simd__("notinbranch"))) extern double exp(double);
+#endif
+"""
+VECTOR_MATH_FLAGS = ("-Wl,-z,defs", "-lmvec")
+"""Link flags of the vector-math build: every symbol resolved (a missing libmvec fails the
+build, which then falls back to the scalar calls) and glibc's vector math library."""
+
+
+def _vector_math(source: str) -> str | None:
+    """``source`` with libmvec's vector variants of ``sin``/``cos``/``exp`` declared, or
+    ``None`` on a platform without them."""
+    if platform.machine() not in ("x86_64", "AMD64") or _MATH_INCLUDE not in source:
+        return None
+    return source.replace(_MATH_INCLUDE, _MATH_INCLUDE + _VECTOR_MATH, 1)
 
 
 def _patch_kernel(source: str) -> str:
@@ -304,19 +339,32 @@ def _build(fn: ca.Function, compiler: str, target: Path, compact: bool = True) -
         cg.generate(tmp + os.sep)
         path = Path(tmp) / source
         text = _patch_kernel(path.read_text())
-        path.write_text(compact_weights(text)[0] if compact else text)
+        text = compact_weights(text)[0] if compact else text
+        vector = _vector_math(text)
+        if vector is not None:
+            path.write_text(vector)
+            try:
+                compile_library(path, target, compiler, link=VECTOR_MATH_FLAGS)
+                return
+            except subprocess.CalledProcessError:
+                pass  # no libmvec: the scalar calls
+        path.write_text(text)
         compile_library(path, target, compiler)
 
 
 def compile_library(
-    source: Path, target: Path, compiler: str, flags: tuple[str, ...] = CFLAGS
+    source: Path,
+    target: Path,
+    compiler: str,
+    flags: tuple[str, ...] = CFLAGS,
+    link: tuple[str, ...] = (),
 ) -> None:
     """Compile C ``source`` into the shared library ``target`` (written atomically: concurrent
-    builders never see a partial file)."""
+    builders never see a partial file); ``link``: extra linker flags."""
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
         library = Path(tmp) / "lib.so"
-        cmd = [compiler, *flags, str(source), "-o", str(library), "-lm"]
+        cmd = [compiler, *flags, str(source), "-o", str(library), *link, "-lm"]
         subprocess.run(cmd, check=True, capture_output=True, text=True)
         os.replace(library, target)
 

@@ -44,6 +44,7 @@ from nehmo_core.planning.interface import (
     one_joint_vector,
 )
 from nehmo_core.planning.ipopt_solver import IpoptSolver
+from nehmo_core.planning.native import loop
 from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
 from nehmo_core.planning.pair_frame import PairMapping, arm_reach, match_pair
 from nehmo_core.planning.self_clearance import SelfClearance, SelfClearanceRows, project_step
@@ -75,12 +76,13 @@ class OptSolver(Protocol):
 
 @dataclass(frozen=True)
 class SqpSolver:
-    """:func:`solve_sqp` with fixed tolerance, iteration limit, screening margin and loop."""
+    """:func:`solve_sqp` with fixed tolerance, iteration limit, screening margin and loop
+    (by default those of :class:`PlannerSettings`)."""
 
-    tol: float = 1e-5
-    max_iter: int = 30
-    screen: float | None = 0.1
-    native: bool = True
+    tol: float = PlannerSettings.sqp_tol
+    max_iter: int = PlannerSettings.sqp_max_iter
+    screen: float | None = PlannerSettings.sqp_screen
+    native: bool = PlannerSettings.sqp_native
 
     def __call__(
         self,
@@ -146,6 +148,13 @@ class NehmoPlanner:
                     self.settings.t_safe,
                 )
         self.solver = solver or make_solver(self.settings)
+        if isinstance(self.solver, SqpSolver) and self.solver.native:
+            # build (first use in this cache) and load the C loop and the models' handles now,
+            # not inside the first tick's deadline
+            c_loop = loop()
+            if c_loop is not None:
+                for model in self.models:
+                    c_loop.model(model)
         self.pairs: dict[str, PairMapping] = {}
         skipped, unmodelled = [], []
         geometry = [(m.robot1, m.robot2, m.base2) for m in self.models]
@@ -184,7 +193,9 @@ class NehmoPlanner:
 
     def reset(self) -> None:
         self._last_current: tuple[object, _Peers] | None = None  # see _current
-        self._warm = np.zeros(self.robot.dof)
+        # the last solution, the next solve's start; None: start at the naive step (at reset, and
+        # after a fail-safe step, a corner of the box that says nothing about the next solution)
+        self._warm: np.ndarray | None = None
         self._hessian: np.ndarray | None = None  # the last solve's Lagrangian Hessian estimate
         seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape_seed
         self._rng = np.random.default_rng(seed)
@@ -363,7 +374,8 @@ class NehmoPlanner:
         problem = self._problem(self._escape_error(now) if escaping else error0, now, rows)
         try:
             hessian = self._hessian if self.settings.sqp_warm_hessian else None
-            result = self.solver(problem, self._warm, deadline, hessian)
+            y_start = problem.naive_step() if self._warm is None else self._warm
+            result = self.solver(problem, y_start, deadline, hessian)
             status = result.status
         except Exception as exc:  # any solver crash must end in the fail-safe
             result, status = None, f"failed ({type(exc).__name__})"
@@ -382,7 +394,7 @@ class NehmoPlanner:
             fail_safe = False
         else:
             u = self._fail_safe(now, rows)
-            self._warm = problem.t_plan * u
+            self._warm = None
             min_constraint, fail_safe = math.nan, True
         if self.settings.escape:
             self._track_stall(error0, min_constraint < self.settings.stall_margin)

@@ -70,7 +70,7 @@ class PlannerSettings:
     sqp_max_iter: int = 30
     # converged when a step is below sqp_tol [rad] (in step units t_plan·u) at a point that
     # breaks no constraint by more than 1e-7 m
-    sqp_tol: float = 1e-5
+    sqp_tol: float = 1e-4
     # with several peers the iterations carry only the V rows below sqp_screen [m] at the naive
     # step; the rest are checked at the solution and join if broken (inf: every row throughout)
     sqp_screen: float = 0.1

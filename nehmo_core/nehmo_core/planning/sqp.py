@@ -88,8 +88,11 @@ def _violation(c: np.ndarray) -> float:
 
 
 def _shortfall(c: np.ndarray) -> float:
-    """Largest constraint violation ``max(0, −min c)``."""
-    return max(0.0, -float(c.min())) if len(c) else 0.0
+    """Largest constraint violation ``max(0, −min c)``; infinite if a row is NaN."""
+    if not len(c):
+        return 0.0
+    low = float(c.min())
+    return max(0.0, -low) if low == low else np.inf
 
 
 def _bfgs(B: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -109,7 +112,7 @@ def _bfgs(B: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
 def solve_sqp(
     problem: OptProblem,
     y_start: np.ndarray,
-    tol: float = 1e-5,
+    tol: float = 1e-4,
     max_iter: int = 30,
     deadline: float = np.inf,
     hessian: np.ndarray | None = None,
