@@ -10,12 +10,24 @@ from pathlib import Path
 from typing import Any
 
 
+def cpu_model() -> str:
+    """The CPU's model name (from ``/proc/cpuinfo``), or the architecture where it is not at hand:
+    timings from different CPUs are not comparable."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def machine_at_end(extra: str = "") -> str:
-    """Architecture, cores, load average now (the end of a run) and Python version."""
+    """Architecture, CPU model, cores, load average now (the end of a run) and Python version."""
     load = os.getloadavg()
     return (
-        f"{platform.machine()}, {os.cpu_count()} cores, load average {load[0]:.1f} at the end,"
-        f" python {platform.python_version()}{extra}"
+        f"{platform.machine()} ({cpu_model()}), {os.cpu_count()} cores, load average "
+        f"{load[0]:.1f} at the end, python {platform.python_version()}{extra}"
     )
 
 

@@ -50,6 +50,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
 import torch
+from _report import cpu_model
 
 from nehmo_core.eval.planners import ModelRegistry
 from nehmo_core.geometry.pybullet_world import CellWorld
@@ -209,7 +210,7 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
     plain_code = compile_function(graph, "compiled", compact=False)
     plain = replace(model, value_grad=plain_code.function, library=plain_code.library, _calls={})
     report: dict[str, Any] = {
-        "machine": platform.processor() or platform.machine(),
+        "machine": f"{platform.machine()} ({cpu_model()})",
         "cpu_count": os.cpu_count(),
         "load_average_at_start": os.getloadavg(),
         "threads": torch.get_num_threads(),
