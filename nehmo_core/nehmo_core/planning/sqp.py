@@ -117,7 +117,7 @@ def solve_sqp(
     deadline: float = np.inf,
     hessian: np.ndarray | None = None,
     feasibility_tol: float = 1e-7,
-    screen: float | None = 0.1,
+    screen: float | None = 0.03,
     native: bool = True,
 ) -> SolveResult:
     """Solve ``problem`` from ``y_start``; ``deadline`` is a ``time.perf_counter()`` instant.
