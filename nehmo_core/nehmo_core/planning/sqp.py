@@ -26,6 +26,7 @@ import numpy as np
 
 from nehmo_core.planning.native import loop
 from nehmo_core.planning.opt import OptProblem
+from nehmo_core.planning.settings import PlannerSettings
 
 __all__ = ["QPStep", "SolveResult", "qp_step", "solve_sqp"]
 
@@ -112,12 +113,12 @@ def _bfgs(B: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
 def solve_sqp(
     problem: OptProblem,
     y_start: np.ndarray,
-    tol: float = 1e-4,
-    max_iter: int = 30,
+    tol: float = PlannerSettings.sqp_tol,
+    max_iter: int = PlannerSettings.sqp_max_iter,
     deadline: float = np.inf,
     hessian: np.ndarray | None = None,
     feasibility_tol: float = 1e-7,
-    screen: float | None = 0.03,
+    screen: float | None = PlannerSettings.sqp_screen,
     native: bool = True,
 ) -> SolveResult:
     """Solve ``problem`` from ``y_start``; ``deadline`` is a ``time.perf_counter()`` instant.
