@@ -184,6 +184,9 @@ def _summarize(
             "p95": float(np.percentile(sqp_iters, 95)) if sqp_iters else None,
         },
         "statuses": counts,
+        "by_status": {
+            k: _stats([t for t, s in zip(times, statuses, strict=True) if s == k]) for k in counts
+        },
         "fail_safe_rate": float(np.mean([s not in ("naive", "optimal") for s in statuses])),
         "p95_over_median": stats["p95_ms"] / stats["median_ms"],
         "floor_batched_v_grad_ms": floor * 1e3,
@@ -276,6 +279,11 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
     return report
 
 
+def _status_times(case: dict[str, Any], status: str) -> str:
+    t = case["by_status"][status]
+    return f"{status} {case['statuses'][status]} ({t['median_ms']:.2f} / {t['p95_ms']:.2f})"
+
+
 def markdown(report: dict[str, Any]) -> str:
     lines = [
         "# Planning speed (one thread)",
@@ -321,8 +329,11 @@ def markdown(report: dict[str, Any]) -> str:
         f"IPOPT (authors' settings) on one dual-UR5 scenario: median {ip['median_ms']:.1f} ms, "
         f"p95 {ip['p95_ms']:.1f} ms per step; statuses {ip['statuses']}.",
         "",
-        "Statuses per case: "
-        + "; ".join(f"{k}: {c['statuses']}" for k, c in report["cases"].items()),
+        "Statuses per case, with each status's steps' median / p95 ms: "
+        + "; ".join(
+            f"{k}: " + ", ".join(_status_times(c, s) for s in c["statuses"])
+            for k, c in report["cases"].items()
+        ),
         "",
     ]
     return "\n".join(lines)
