@@ -24,6 +24,8 @@ pays for, and the stall escape) and ``nehmo_paper`` (the paper's Opt). Two more 
 the solver: ``nehmo, Python SQP loop`` (the same SQP iterating in Python instead of C, same
 answers) and ``nehmo, tight SQP`` (``sqp_tol`` 1e-7 rad, no screening). Like the planner nodes,
 the bench freezes its long-lived objects out of the garbage collector before timing.
+``planning_speed.png`` shows the step times of ``nehmo`` and ``nehmo_paper`` per cell as
+histograms, naive-safe and constrained steps stacked, with the median and p95 marked.
 
 The timed arm's peers all sit at the 0.6 m of the ``ur5_ur5`` model. The other arms of the three-
 and five-UR5 cells also face peers at 0.85 m and 1.2 m; with ``--model shipped`` they carry the
@@ -198,7 +200,11 @@ def _summarize(
     print(cell_name, kind, json.dumps(report["cases"][f"{cell_name} {kind}"]))
 
 
-def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
+Steps = dict[str, tuple[list[float], list[str], list[int]]]
+
+
+def run(scenarios: int, steps: int, model_kind: str) -> tuple[dict[str, Any], Steps]:
+    """The report, and every timed step (seconds, status, iterations) by ``"<cell> <planner>"``."""
     torch.set_num_threads(1)
     if model_kind == "shipped":
         vf = load_value_function("ur5_ur5", variant="bc+sym")
@@ -231,6 +237,7 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
     ]
     variants.insert(1, (CASES[0], "nehmo, CasADi layout", VARIANTS["nehmo"], plain))
     timed: dict[str, tuple[list[float], list[str], list[int]]] = {}
+    steps_by_case: Steps = {}
     registry = ModelRegistry()
     for case in CASES:
         cell_name, arm, peers = case
@@ -268,6 +275,7 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
         ]
         for kind, _, used in mine:
             _summarize(report, case, kind, used, plain, timed[kind], chomp[cell_name], len(chosen))
+            steps_by_case[f"{cell_name} {kind}"] = timed[kind]
     # IPOPT, the authors' solver, on the dual cell for reference
     cell = load_cell("dual_ur5")
     ipopt = {
@@ -276,7 +284,59 @@ def run(scenarios: int, steps: int, model_kind: str) -> dict[str, Any]:
     scenario = _scenarios("dual_ur5", 1, 200)[0]
     t, s, _ = _episode("dual_ur5", ipopt, scenario, min(steps, 100), "ur5_0")
     report["ipopt_dual_one_scenario"] = {**_stats(t), "statuses": {k: s.count(k) for k in set(s)}}
-    return report
+    return report, steps_by_case
+
+
+def plot(report: dict[str, Any], steps: Steps, path: Path) -> None:
+    """Step-time histograms of ``nehmo`` and ``nehmo_paper`` per cell, naive-safe and
+    constrained steps stacked, with the median and p95 marked: where the ratio comes from."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib import ticker
+
+    planners = ("nehmo", "nehmo_paper")
+    fig, axes = plt.subplots(
+        len(planners), len(CASES), figsize=(4.2 * len(CASES), 5.6), squeeze=False
+    )
+    for row, planner in enumerate(planners):
+        for col, (cell_name, _, peers) in enumerate(CASES):
+            ax = axes[row][col]
+            key = f"{cell_name} {planner}"
+            times, statuses, _ = steps[key]
+            t = np.array(times) * 1e3
+            naive = np.array([s == "naive" for s in statuses])
+            bins = np.geomspace(max(t.min(), 1e-3), t.max(), 40)
+            ax.hist(
+                [t[naive], t[~naive]],
+                bins=bins,
+                stacked=True,
+                color=["#9cc3e4", "#c0392b"],
+                label=["naive step safe", "constrained (SQP or fail-safe)"],
+            )
+            case = report["cases"][key]["nehmo"]
+            for value, style, name in (
+                (case["median_ms"], "-", "median"),
+                (case["p95_ms"], "--", "p95"),
+            ):
+                ax.axvline(value, color="black", linestyle=style, linewidth=1, label=name)
+            ax.set_xscale("log")
+            ax.xaxis.set_major_locator(
+                ticker.FixedLocator([0.05, 0.1, 0.2, 0.3, 0.5, 1, 2, 3, 5, 10, 20])
+            )
+            ax.xaxis.set_major_formatter(ticker.FormatStrFormatter("%g"))
+            ax.xaxis.set_minor_formatter(ticker.NullFormatter())
+            ax.set_xlim(bins[0] / 1.1, bins[-1] * 1.1)
+            ratio = case["p95_ms"] / case["median_ms"]
+            ax.set_title(f"{planner}, {peers} peer(s): p95/median {ratio:.2f}", fontsize=9)
+            ax.set_xlabel("step time [ms]")
+            ax.set_ylabel("steps")
+            if row == 0 and col == 0:
+                ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _status_times(case: dict[str, Any], status: str) -> str:
@@ -313,6 +373,11 @@ def markdown(report: dict[str, Any]) -> str:
             f"{c['floor_batched_v_grad_ms']:.3f} | {c['median_over_floor']:.1f} | "
             f"{c['chomp_plan_median_s']:.2f} | {c['chomp_over_nehmo_step']:.0f} |"
         )
+    lines += [
+        "",
+        "![Step-time histograms: naive-safe and constrained steps, median and p95]"
+        "(planning_speed.png)",
+    ]
     ip = report["ipopt_dual_one_scenario"]
     floors = {c["peers"]: c for c in report["cases"].values() if c["planner"] == "nehmo"}
     lines += [
@@ -345,10 +410,11 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=150)
     parser.add_argument("--model", choices=("shipped", "random"), default="shipped")
     args = parser.parse_args()
-    report = run(args.scenarios, args.steps, args.model)
+    report, steps = run(args.scenarios, args.steps, args.model)
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "planning_speed.json").write_text(json.dumps(report, indent=2) + "\n")
     (RESULTS / "planning_speed.md").write_text(markdown(report))
+    plot(report, steps, RESULTS / "planning_speed.png")
     print(markdown(report))
 
 
