@@ -236,8 +236,7 @@ def run(scenarios: int, steps: int, model_kind: str) -> tuple[dict[str, Any], St
         for case, (kind, settings) in itertools.product(CASES, VARIANTS.items())
     ]
     variants.insert(1, (CASES[0], "nehmo, CasADi layout", VARIANTS["nehmo"], plain))
-    timed: dict[str, tuple[list[float], list[str], list[int]]] = {}
-    steps_by_case: Steps = {}
+    timed: Steps = {}  # by "<cell> <planner>"
     registry = ModelRegistry()
     for case in CASES:
         cell_name, arm, peers = case
@@ -261,21 +260,22 @@ def run(scenarios: int, steps: int, model_kind: str) -> tuple[dict[str, Any], St
         gc.collect()
         gc.freeze()
         for kind, _, _ in mine:
-            timed[kind] = ([], [], [])
+            timed[f"{cell_name} {kind}"] = ([], [], [])
         # the variants take turns scenario by scenario, so a drift in the machine's speed
         # during the run reaches all of them alike
         for scenario in chosen:
             for kind, _, _ in mine:
                 t, s, it = _episode(cell_name, planners[kind], scenario, steps, arm)
-                timed[kind][0].extend(t)
-                timed[kind][1].extend(s)
-                timed[kind][2].extend(it)
+                acc = timed[f"{cell_name} {kind}"]
+                acc[0].extend(t)
+                acc[1].extend(s)
+                acc[2].extend(it)
         chomp[cell_name] = [
             plan_chomp(cell, scenario.start, scenario.goal).plan_time for scenario in chosen
         ]
         for kind, _, used in mine:
-            _summarize(report, case, kind, used, plain, timed[kind], chomp[cell_name], len(chosen))
-            steps_by_case[f"{cell_name} {kind}"] = timed[kind]
+            done = timed[f"{cell_name} {kind}"]
+            _summarize(report, case, kind, used, plain, done, chomp[cell_name], len(chosen))
     # IPOPT, the authors' solver, on the dual cell for reference
     cell = load_cell("dual_ur5")
     ipopt = {
@@ -284,7 +284,7 @@ def run(scenarios: int, steps: int, model_kind: str) -> tuple[dict[str, Any], St
     scenario = _scenarios("dual_ur5", 1, 200)[0]
     t, s, _ = _episode("dual_ur5", ipopt, scenario, min(steps, 100), "ur5_0")
     report["ipopt_dual_one_scenario"] = {**_stats(t), "statuses": {k: s.count(k) for k in set(s)}}
-    return report, steps_by_case
+    return report, timed
 
 
 def plot(report: dict[str, Any], steps: Steps, path: Path) -> None:
