@@ -2,7 +2,9 @@
 
 Seeking readers reject a file without its summary and footer. This module reads the damaged
 file sequentially, without seeking, keeps every schema, channel, message and metadata record up
-to the point where the data stops making sense, and rewrites them into a finished file::
+to the point where the data stops making sense (a truncated record, or a chunk whose checksum
+fails, e.g. one torn by a write that failed on a full disk: its length field then runs into the
+records after it), and rewrites them into a finished file::
 
     python -m nehmo_core.logs.recover broken.mcap fixed.mcap
 
@@ -69,7 +71,8 @@ def recover(src: str | Path, dst: str | Path, overwrite: bool = False) -> Recove
     with src.open("rb") as stream_in, dst.open("wb") as stream_out:
         writer = Writer(stream_out, compression=CompressionType.NONE)
         try:
-            for record in StreamReader(stream_in, record_size_limit=1 << 30).records:
+            reader = StreamReader(stream_in, validate_crcs=True, record_size_limit=1 << 30)
+            for record in reader.records:
                 if isinstance(record, Header):
                     writer.start(profile=record.profile, library=record.library)
                     started = True
