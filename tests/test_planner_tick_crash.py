@@ -1,0 +1,79 @@
+"""A bug inside a planner node's tick: the node commands zero velocity, reports it once per
+throttle interval, and its timer keeps ticking. In-process: the node is built from parameters
+as ``ros2 run`` builds it, and its controller's ``tick`` is made to raise."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+from _ros_testutil import DOMAIN_ID
+
+from nehmo_core.logs import command_topic
+from nehmo_ros import ros
+from nehmo_ros.arm_planner import ArmPlannerNode
+
+
+def test_a_raising_tick_commands_zero_reports_once_and_the_timer_goes_on(
+    monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
+) -> None:
+    params = ["cell:=dual_ur5", "arm_id:=ur5_0", "planner:=naive"]
+    ros.init(
+        args=["arm_planner", "--ros-args"] + [a for p in params for a in ("-p", p)],
+        domain_id=DOMAIN_ID,
+    )
+    try:
+        planner = ArmPlannerNode()
+        listener = ros.Node("listener")
+        commands: list[list[float]] = []
+        listener.create_subscription(
+            ros.msg.Float64MultiArray,
+            command_topic("ur5_0"),
+            lambda msg: commands.append(list(msg.data)),
+            10,
+        )
+        executor = ros.SingleThreadedExecutor()
+        executor.add_node(planner.node)
+        executor.add_node(listener)
+
+        def spin(seconds: float, until: Callable[[], bool] = lambda: False) -> None:
+            end = time.monotonic() + seconds
+            while time.monotonic() < end and not until():
+                executor.spin_once(timeout_sec=0.01)
+
+        ticks = [0]
+
+        def broken(*args: Any, **kwargs: Any) -> Any:
+            ticks[0] += 1
+            raise RuntimeError("injected bug")
+
+        spin(10.0, lambda: planner.command_pub.get_subscription_count() >= 1)
+        monkeypatch.setattr(planner.controller, "tick", broken)
+        spin(0.6)  # 15 ticks at 25 Hz, inside one 2 s throttle interval
+        assert ticks[0] >= 5
+        spin(1.0, lambda: len(commands) >= 5)
+        assert len(commands) >= 5
+        assert all(c == [0.0] * 6 for c in commands)
+        err = capfd.readouterr().err
+        assert err.count("tick failed (RuntimeError: injected bug); commanding zero velocity") == 1
+        monkeypatch.undo()  # the bug goes away: the same timer ticks the real controller again
+        calls = [0]
+        real = planner.controller.tick
+
+        def counted(*args: Any, **kwargs: Any) -> Any:
+            calls[0] += 1
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(planner.controller, "tick", counted)
+        spin(0.3)
+        assert calls[0] >= 3
+        assert "tick failed" not in capfd.readouterr().err
+        planner.on_stop()
+        executor.remove_node(planner.node)
+        executor.remove_node(listener)
+        planner.node.destroy_node()
+        listener.destroy_node()
+    finally:
+        ros.try_shutdown()
