@@ -1,11 +1,16 @@
-"""Helpers of the ROS runtime tests: a DDS domain per test run, bounded subprocesses."""
+"""Helpers of the ROS runtime tests: a DDS domain per test run, bounded subprocesses, nodes
+spun in the test's own process."""
 
 from __future__ import annotations
 
 import os
 import subprocess
 import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 PROC = Path(__file__).resolve().parent / "_ros_proc.py"
@@ -46,3 +51,47 @@ def finish(proc: subprocess.Popen[str], timeout: float = 20.0) -> tuple[int, str
         proc.kill()
         out, err = proc.communicate()
     return proc.returncode, out, err
+
+
+class Spinner:
+    """One executor for the nodes a test runs in its own process."""
+
+    def __init__(self) -> None:
+        from nehmo_ros import ros
+
+        self.executor = ros.SingleThreadedExecutor()
+        self.nodes: list[Any] = []
+
+    def add(self, node: Any) -> Any:
+        self.executor.add_node(node)
+        self.nodes.append(node)
+        return node
+
+    def spin(self, seconds: float, until: Callable[[], bool] = lambda: False) -> None:
+        """Spin for ``seconds``, or until ``until()`` holds."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end and not until():
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def close(self) -> None:
+        for node in self.nodes:
+            self.executor.remove_node(node)
+            node.destroy_node()
+
+
+@contextmanager
+def in_process(executable: str, params: Sequence[str]) -> Iterator[Spinner]:
+    """The ROS context of one in-process test: ``executable --ros-args -p …`` in this test
+    run's domain; the spinner's nodes are destroyed and the context shut down at the end."""
+    from nehmo_ros import ros
+
+    ros.init(
+        args=[executable, "--ros-args", *[a for p in params for a in ("-p", p)]],
+        domain_id=DOMAIN_ID,
+    )
+    try:
+        spinner = Spinner()
+        yield spinner
+        spinner.close()
+    finally:
+        ros.try_shutdown()

@@ -4,12 +4,10 @@ as ``ros2 run`` builds it, and its controller's ``tick`` is made to raise."""
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from typing import Any
 
 import pytest
-from _ros_testutil import DOMAIN_ID
+from _ros_testutil import in_process
 
 from nehmo_core.logs import command_topic
 from nehmo_ros import ros
@@ -20,11 +18,7 @@ def test_a_raising_tick_commands_zero_reports_once_and_the_timer_goes_on(
     monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
 ) -> None:
     params = ["cell:=dual_ur5", "arm_id:=ur5_0", "planner:=naive"]
-    ros.init(
-        args=["arm_planner", "--ros-args"] + [a for p in params for a in ("-p", p)],
-        domain_id=DOMAIN_ID,
-    )
-    try:
+    with in_process("arm_planner", params) as nodes:
         planner = ArmPlannerNode()
         listener = ros.Node("listener")
         commands: list[list[float]] = []
@@ -34,26 +28,19 @@ def test_a_raising_tick_commands_zero_reports_once_and_the_timer_goes_on(
             lambda msg: commands.append(list(msg.data)),
             10,
         )
-        executor = ros.SingleThreadedExecutor()
-        executor.add_node(planner.node)
-        executor.add_node(listener)
-
-        def spin(seconds: float, until: Callable[[], bool] = lambda: False) -> None:
-            end = time.monotonic() + seconds
-            while time.monotonic() < end and not until():
-                executor.spin_once(timeout_sec=0.01)
-
+        nodes.add(planner.node)
+        nodes.add(listener)
         ticks = [0]
 
         def broken(*args: Any, **kwargs: Any) -> Any:
             ticks[0] += 1
             raise RuntimeError("injected bug")
 
-        spin(10.0, lambda: planner.command_pub.get_subscription_count() >= 1)
+        nodes.spin(10.0, lambda: planner.command_pub.get_subscription_count() >= 1)
         monkeypatch.setattr(planner.controller, "tick", broken)
-        spin(0.6)  # 15 ticks at 25 Hz, inside one 2 s throttle interval
+        nodes.spin(0.6)  # 15 ticks at 25 Hz, inside one 2 s throttle interval
         assert ticks[0] >= 5
-        spin(1.0, lambda: len(commands) >= 5)
+        nodes.spin(1.0, lambda: len(commands) >= 5)
         assert len(commands) >= 5
         assert all(c == [0.0] * 6 for c in commands)
         err = capfd.readouterr().err
@@ -67,13 +54,7 @@ def test_a_raising_tick_commands_zero_reports_once_and_the_timer_goes_on(
             return real(*args, **kwargs)
 
         monkeypatch.setattr(planner.controller, "tick", counted)
-        spin(0.3)
+        nodes.spin(0.3)
         assert calls[0] >= 3
         assert "tick failed" not in capfd.readouterr().err
         planner.on_stop()
-        executor.remove_node(planner.node)
-        executor.remove_node(listener)
-        planner.node.destroy_node()
-        listener.destroy_node()
-    finally:
-        ros.try_shutdown()

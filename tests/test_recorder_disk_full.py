@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import errno
 import io
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
-from _ros_testutil import DOMAIN_ID
+from _ros_testutil import in_process
 
 import nehmo_core.logs.writer as writer_module
 from nehmo_core.logs import JointState, joint_states_topic, read_log
@@ -83,38 +82,22 @@ def rig(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Rig]:
     monkeypatch.setattr(writer_module, "open", open_on_device, raising=False)
     path = tmp_path / "run.mcap"
     params = ["cell:=dual_ur5", f"output:={path}", "flush_every:=5", "flush_interval:=0.2"]
-    ros.init(
-        args=["recorder", "--ros-args"] + [a for p in params for a in ("-p", p)],
-        domain_id=DOMAIN_ID,
-    )
-    try:
+    with in_process("recorder", params) as nodes:
         recorder = RecorderNode()
         talker = ros.Node("talker")
         pub = talker.create_publisher(ros.msg.JointState, TOPIC, 100)
-        executor = ros.SingleThreadedExecutor()
-        executor.add_node(recorder.node)
-        executor.add_node(talker)
-
-        def spin(seconds: float, until: Callable[[], bool] = lambda: False) -> None:
-            end = time.monotonic() + seconds
-            while time.monotonic() < end and not until():
-                executor.spin_once(timeout_sec=0.02)
+        nodes.add(recorder.node)
+        nodes.add(talker)
 
         def burst(first: int, count: int) -> None:
             """Messages ``first`` … at 100 Hz, then 0.5 s (2.5 flush intervals) of silence."""
             for k in range(first, first + count):
                 pub.publish(JointState(name=["a"], position=[float(k)] + [0.0] * WIDTH))
-                spin(0.01)
-            spin(0.5)
+                nodes.spin(0.01)
+            nodes.spin(0.5)
 
-        spin(10.0, lambda: pub.get_subscription_count() >= 1)
+        nodes.spin(10.0, lambda: pub.get_subscription_count() >= 1)
         yield Rig(recorder, devices[0], path, burst)
-        executor.remove_node(recorder.node)
-        executor.remove_node(talker)
-        recorder.node.destroy_node()
-        talker.destroy_node()
-    finally:
-        ros.try_shutdown()
 
 
 def _firsts(path: Path) -> list[float]:
