@@ -204,6 +204,25 @@ def _summarize(
 Steps = dict[str, tuple[list[float], list[str], list[int]]]
 
 
+def _pass(
+    cell_name: str,
+    planners: dict[str, dict[str, Any]],
+    scenarios: list[Scenario],
+    steps: int,
+    arm: str,
+) -> Steps:
+    """Every variant's closed loops once, by variant. The variants take turns scenario by
+    scenario, so a drift in the machine's speed reaches all of them alike."""
+    out: Steps = {kind: ([], [], []) for kind in planners}
+    for scenario in scenarios:
+        for kind, arms in planners.items():
+            t, s, it = _episode(cell_name, arms, scenario, steps, arm)
+            out[kind][0].extend(t)
+            out[kind][1].extend(s)
+            out[kind][2].extend(it)
+    return out
+
+
 def run(
     scenarios: int, steps: int, model_kind: str, repeats: int = 1
 ) -> tuple[dict[str, Any], Steps]:
@@ -264,36 +283,16 @@ def run(
         # reach, so a full collection does not land inside a timed step
         gc.collect()
         gc.freeze()
-        for kind, _, _ in mine:
-            timed[f"{cell_name} {kind}"] = ([], [], [])
-        # the variants take turns scenario by scenario, so a drift in the machine's speed
-        # during the run reaches all of them alike
-        for scenario in chosen:
-            for kind, _, _ in mine:
-                t, s, it = _episode(cell_name, planners[kind], scenario, steps, arm)
-                acc = timed[f"{cell_name} {kind}"]
-                acc[0].extend(t)
-                acc[1].extend(s)
-                acc[2].extend(it)
+
+        # passes after the first repeat the same work: how much of the ratio is the machine's
+        passes = [_pass(cell_name, planners, chosen, steps, arm) for _ in range(repeats)]
         chomp[cell_name] = [
             plan_chomp(cell, scenario.start, scenario.goal).plan_time for scenario in chosen
         ]
         for kind, _, used in mine:
-            done = timed[f"{cell_name} {kind}"]
+            done = timed[f"{cell_name} {kind}"] = passes[0][kind]
             _summarize(report, case, kind, used, plain, done, chomp[cell_name], len(chosen))
-        # the same closed loops again: how much of the ratio is the machine's timing
-        passes = {kind: [timed[f"{cell_name} {kind}"]] for kind, _, _ in mine}
-        for _ in range(repeats - 1):
-            again: Steps = {kind: ([], [], []) for kind, _, _ in mine}
-            for scenario in chosen:
-                for kind, _, _ in mine:
-                    t, s, it = _episode(cell_name, planners[kind], scenario, steps, arm)
-                    again[kind][0].extend(t)
-                    again[kind][1].extend(s)
-                    again[kind][2].extend(it)
-            for kind in again:
-                passes[kind].append(again[kind])
-        for kind, runs in passes.items():
+            runs = [p[kind] for p in passes]
             c = report["cases"][f"{cell_name} {kind}"]
             c["p95_over_median_per_pass"] = [
                 float(np.percentile(t, 95) / np.median(t)) for t, _, _ in runs

@@ -62,10 +62,9 @@ class Spinner:
         self.executor = ros.SingleThreadedExecutor()
         self.nodes: list[Any] = []
 
-    def add(self, node: Any) -> Any:
+    def add(self, node: Any) -> None:
         self.executor.add_node(node)
         self.nodes.append(node)
-        return node
 
     def spin(self, seconds: float, until: Callable[[], bool] = lambda: False) -> None:
         """Spin for ``seconds``, or until ``until()`` holds."""
