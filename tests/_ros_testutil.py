@@ -1,5 +1,5 @@
-"""Helpers of the ROS runtime tests: a DDS domain per test run, bounded subprocesses, nodes
-spun in the test's own process."""
+"""Helpers of the ROS tests: a DDS domain per test run, bounded subprocesses, nodes spun in
+the test's own process (rclpy)."""
 
 from __future__ import annotations
 
@@ -20,12 +20,11 @@ DOMAIN_ID = 100 + os.getpid() % 120
 
 
 def child_env(**extra: str) -> dict[str, str]:
-    """Environment of a child process: this run's domain, the embedded runtime, nehmo_core."""
+    """Environment of a child process: this run's domain, discovery on this machine only."""
     env = dict(os.environ)
     env["ROS_DOMAIN_ID"] = str(DOMAIN_ID)
-    env["NEHMO_RUNTIME"] = "embedded"
-    env.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)
-    env.pop("NEHMO_DDS_CONFIG", None)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.pop("ROS_STATIC_PEERS", None)
     paths = [str(REPO / "nehmo_core"), str(REPO / "nehmo_ros"), env.get("PYTHONPATH", "")]
     env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
     env.update(extra)
@@ -57,9 +56,9 @@ class Spinner:
     """One executor for the nodes a test runs in its own process."""
 
     def __init__(self) -> None:
-        from nehmo_ros import ros
+        from rclpy.executors import MultiThreadedExecutor
 
-        self.executor = ros.SingleThreadedExecutor()
+        self.executor = MultiThreadedExecutor(num_threads=3)
         self.nodes: list[Any] = []
 
     def add(self, node: Any) -> None:
@@ -76,21 +75,24 @@ class Spinner:
         for node in self.nodes:
             self.executor.remove_node(node)
             node.destroy_node()
+        self.executor.shutdown(timeout_sec=1.0)
 
 
 @contextmanager
 def in_process(executable: str, params: Sequence[str]) -> Iterator[Spinner]:
     """The ROS context of one in-process test: ``executable --ros-args -p …`` in this test
     run's domain; the spinner's nodes are destroyed and the context shut down at the end."""
-    from nehmo_ros import ros
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
 
-    ros.init(
+    rclpy.init(
         args=[executable, "--ros-args", *[a for p in params for a in ("-p", p)]],
         domain_id=DOMAIN_ID,
+        signal_handler_options=SignalHandlerOptions.NO,
     )
     try:
         spinner = Spinner()
         yield spinner
         spinner.close()
     finally:
-        ros.try_shutdown()
+        rclpy.try_shutdown()

@@ -30,7 +30,7 @@ def _bridge(at_goal: bool, t: float, **changes: object) -> SimpleNamespace:
         _done_at=0.0,
         dropped={a: 0 for a in cell.arm_ids},
         watchdog_trips={a: 0 for a in cell.arm_ids},
-        node=SimpleNamespace(get_logger=lambda: logging.getLogger("bridge")),
+        get_logger=lambda: logging.getLogger("bridge"),
     )
 
 

@@ -45,7 +45,7 @@ def _bridge(clock: FakeClock, **changes: object) -> SimBridgeNode:
     bridge.velocity_limits = {
         a.arm_id: np.array([j.velocity for j in a.robot.joints]) for a in CELL.arms
     }
-    bridge.node = SimpleNamespace(get_logger=lambda: logging.getLogger("bridge"))  # type: ignore[assignment]
+    bridge.get_logger = lambda: logging.getLogger("bridge")  # type: ignore[method-assign]
     return bridge
 
 

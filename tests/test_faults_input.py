@@ -94,8 +94,8 @@ def _commands(root: Path) -> dict[str, tuple[list[str], str]]:
             "parameter `model`",
         ),
         "recorder_output": (
-            [*recorder, "-p", "output:=/proc/no/such.mcap"],
-            "`output` must be a writable file path",
+            [*recorder, "-p", "output:=/proc/no/such_bag"],
+            "`output` must be a writable directory path",
         ),
         "evaluate_log": (
             ["-m", "nehmo_ros.orchestrate", "evaluate", str(root / "garbage.mcap")],
@@ -237,9 +237,9 @@ def test_recover_leaves_an_existing_output_alone(root: Path, results: dict) -> N
 def test_recorder_never_overwrites_a_log(tmp_path: Path) -> None:
     from nehmo_ros.recorder import free_path
 
-    log = tmp_path / "run.mcap"
-    assert free_path(log) == log
-    log.write_bytes(b"old")
-    assert free_path(log) == tmp_path / "run_1.mcap"
-    (tmp_path / "run_1.mcap").write_bytes(b"older")
-    assert free_path(log) == tmp_path / "run_2.mcap"
+    bag = tmp_path / "run"
+    assert free_path(bag) == bag
+    bag.mkdir()
+    assert free_path(bag) == tmp_path / "run_1"
+    (tmp_path / "run_1").mkdir()
+    assert free_path(bag) == tmp_path / "run_2"

@@ -1,7 +1,7 @@
 """Faults around a running ``arm_planner`` process: bad peers and a failing solver.
 
-The test process stands in for the bridge (a :class:`World` on the embedded runtime, in this
-run's DDS domain): it publishes every arm's joint states at 50 Hz, integrating the planners'
+The test process stands in for the bridge (a :class:`World`, a plain rclpy node in this run's DDS
+domain): it publishes every arm's joint states at 50 Hz, integrating the planners'
 commands, the goals (latched), and scripts faults into what the planners receive. Planners run
 as real node processes; their ``/<arm>/planner/status`` stream and log lines are the evidence.
 """
@@ -19,11 +19,14 @@ from typing import Any
 import numpy as np
 import pytest
 from _ros_testutil import DOMAIN_ID, child_env
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
 
 from nehmo_core.robots import load_cell
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import sample_scenario, scenario_rng
-from nehmo_ros import msgs
 from nehmo_ros.orchestrate import Process, node_command
 
 #: What a status says when the planner itself ran on the tick's observations.
@@ -59,43 +62,45 @@ class World:
     script_start: float = math.inf
 
     def __post_init__(self) -> None:
-        from nehmo_ros import ros
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
 
-        self.ros = ros
-        ros.init(args=[], domain_id=DOMAIN_ID)
-        self.node = n = ros.Node("fake_world")
-        latched = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
+        self.rclpy = rclpy
+        rclpy.init(args=[], domain_id=DOMAIN_ID)
+        self.node = n = Node("fake_world")
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.state_pubs = {
-            a: n.create_publisher(msgs.JointState, f"/{a}/joint_states", 10)
+            a: n.create_publisher(JointState, f"/{a}/joint_states", 10)
             for a in self.cell.arm_ids
         }
         self.goal_pubs = {
-            a: n.create_publisher(msgs.JointState, f"/{a}/goal", latched) for a in self.cell.arm_ids
+            a: n.create_publisher(JointState, f"/{a}/goal", latched) for a in self.cell.arm_ids
         }
         self.commands: dict[str, np.ndarray] = {}
         for a in self.cell.arm_ids:
             self.statuses[a] = []
             n.create_subscription(
-                msgs.Float64MultiArray,
+                Float64MultiArray,
                 f"/{a}/velocity_controller/commands",
                 lambda m, a=a: self.commands.__setitem__(a, np.array(m.data)),
                 10,
             )
             n.create_subscription(
-                msgs.DiagnosticStatus, f"/{a}/planner/status", lambda m, a=a: self._status(a, m), 50
+                DiagnosticStatus, f"/{a}/planner/status", lambda m, a=a: self._status(a, m), 50
             )
         for a, goal in self.goals.items():
             self.publish_goal(a, list(goal))
         self.last = time.monotonic()
         n.create_timer(0.02, self._tick)
-        self.executor = ros.SingleThreadedExecutor()
+        self.executor = SingleThreadedExecutor()
         self.executor.add_node(n)
 
     def names(self, arm_id: str) -> list[str]:
         return list(self.cell.arm(arm_id).robot.joint_names)
 
     def publish_goal(self, arm_id: str, position: list[float]) -> None:
-        self.goal_pubs[arm_id].publish(msgs.JointState(name=self.names(arm_id), position=position))
+        self.goal_pubs[arm_id].publish(JointState(name=self.names(arm_id), position=position))
 
     def _status(self, arm_id: str, m: Any) -> None:
         values = {kv.key: kv.value for kv in m.values}
@@ -104,7 +109,7 @@ class World:
     def _tick(self) -> None:
         now = time.monotonic()
         dt, self.last = now - self.last, now
-        stamp = msgs.Time(sec=int(time.time()), nanosec=time.time_ns() % 1_000_000_000)
+        sec, nanosec = divmod(time.time_ns(), 1_000_000_000)
         for a, pub in self.state_pubs.items():
             robot = self.cell.arm(a).robot
             u = self.commands.get(a)
@@ -117,11 +122,9 @@ class World:
                 continue
             if isinstance(shown, tuple):
                 names, position = shown
-            pub.publish(
-                msgs.JointState(
-                    header=msgs.Header(stamp=stamp), name=names, position=position, velocity=[]
-                )
-            )
+            msg = JointState(name=names, position=position)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+            pub.publish(msg)
 
     def spin(self, seconds: float, until: Callable[[], bool] | None = None) -> bool:
         end = time.monotonic() + seconds
@@ -133,7 +136,7 @@ class World:
 
     def close(self) -> None:
         self.node.destroy_node()
-        self.ros.try_shutdown()
+        self.rclpy.try_shutdown()
 
 
 def _planner(arm_id: str, cell: str, log: Path, **params: object) -> Process:
@@ -247,7 +250,7 @@ def test_bad_or_silent_peer_is_never_planned_against(peer_run: tuple, phase: str
     reported = [s for s in window if s.message != "deadline_missed"]
     key = "stale_peers" if phase == "silent" else "untrusted_peers"
     assert reported and all("ur5_1" in s.values[key] for s in reported)
-    assert all(s.level == msgs.DiagnosticStatus.WARN for s in reported)
+    assert all(s.level == DiagnosticStatus.WARN for s in reported)
     assert all(s.values["hold"] == "true" and not np.any(s.command) for s in reported)
 
 
@@ -342,7 +345,7 @@ def test_a_raising_solver_gets_the_fail_safe_and_is_counted(solver_run: tuple) -
     after = _after_fault(world, "ur5_0")
     failed = [s for s in after if s.message == "failed"]
     assert len(failed) >= 0.8 * len(after)
-    assert all(s.level == msgs.DiagnosticStatus.ERROR for s in failed)
+    assert all(s.level == DiagnosticStatus.ERROR for s in failed)
     assert all("Injected" in s.values["error"] for s in failed)
     for s in failed:  # the fail-safe ū·sign(∂V/∂q) (or zero while it is unknown)
         assert set(np.round(np.abs(s.command), 12)) <= {0.0, 0.5}

@@ -2,8 +2,8 @@
 stopped by signals, a second recorder SIGKILLed and its log recovered with the command line.
 
 One dual-UR5 episode in wall time (scenario 0 of seed 0: the arms' paths cross) with the
-bridge, two planners and two recorders as separate processes on the embedded runtime, in this
-test run's DDS domain. Recorder A is stopped with SIGTERM at the end, recorder B is SIGKILLed
+bridge, two planners and two recorders as separate rclpy processes, in this test run's DDS
+domain. Recorder A is stopped with SIGTERM at the end, recorder B is SIGKILLed
 a few seconds after the planner; A's finished log is the reference for what B must still hold.
 """
 
@@ -46,22 +46,24 @@ class Run:
 
 def _bad_commands(arm_id: str, seconds: float) -> None:
     """Publish malformed commands for ``arm_id`` at 25 Hz: NaN, too short, too fast."""
-    from nehmo_ros import msgs, ros
+    import rclpy
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray
 
     bad = [[math.nan] * 6, [0.1] * 5, [10.0] * 6]
-    ros.init(args=[], domain_id=DOMAIN_ID)
+    rclpy.init(args=[], domain_id=DOMAIN_ID)
     try:
-        node = ros.Node("bad_commands")
+        node = Node("bad_commands")
         topic = f"/{arm_id}/velocity_controller/commands"
-        pub = node.create_publisher(msgs.Float64MultiArray, topic, 10)
+        pub = node.create_publisher(Float64MultiArray, topic, 10)
         end, k = time.monotonic() + seconds, 0
         while time.monotonic() < end:
-            pub.publish(msgs.Float64MultiArray(data=bad[k % len(bad)]))
+            pub.publish(Float64MultiArray(data=bad[k % len(bad)]))
             k += 1
             time.sleep(0.04)
         node.destroy_node()
     finally:
-        ros.try_shutdown()
+        rclpy.try_shutdown()
 
 
 def _stop(proc: Process, timeout: float) -> int | None:
@@ -94,7 +96,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
 
     try:
         for name in ("recorder_a", "recorder_b"):
-            launch(name, "nehmo_ros.recorder", {"cell": cell.name, "output": out / f"{name}.mcap"})
+            launch(name, "nehmo_ros.recorder", {"cell": cell.name, "output": out / name})
         for arm_id in cell.arm_ids:
             launch(
                 f"planner_{arm_id}", "nehmo_ros.arm_planner", {"arm_id": arm_id, "cell": "dual_ur5"}
@@ -154,7 +156,7 @@ def test_signals_end_bridge_and_recorder_cleanly(run: Run) -> None:
     assert "messages written to" in run.outputs["recorder_a"]
     for name in ("bridge", "recorder_a", "planner_ur5_0"):
         assert "Traceback" not in run.outputs[name], run.outputs[name][-3000:]
-    summary = summarize(run.out / "recorder_a.mcap")  # a finished file: summary section present
+    summary = summarize(run.out / "recorder_a")  # a finished file: summary section present
     assert summary.message_count > 500
     assert summary.end_ns >= run.t_stop - 100_000_000  # recorded up to the stop
 
@@ -168,7 +170,7 @@ def test_the_watchdog_stops_the_arm_of_a_killed_planner(run: Run) -> None:
     assert counts["dropped_commands"]["ur5_1"] >= 20  # NaN, short and too fast: all dropped
     assert counts["dropped_commands"]["ur5_0"] == 0
     assert "dropped command of ur5_1" in run.outputs["bridge"]
-    states = _states(run.out / "recorder_a.mcap", "ur5_1")
+    states = _states(run.out / "recorder_a", "ur5_1")
     before = [m for t, m in states if t < run.t_kill_planner]
     assert any(np.any(np.abs(m.velocity) > 0.05) for m in before)  # it was moving
     held = [m for t, m in states if t > run.t_kill_planner + (COMMAND_TIMEOUT + 0.15) * 1e9]
@@ -179,7 +181,7 @@ def test_the_watchdog_stops_the_arm_of_a_killed_planner(run: Run) -> None:
 
 
 def test_the_other_arm_keeps_planning_around_it(run: Run) -> None:
-    log = run.out / "recorder_a.mcap"
+    log = run.out / "recorder_a"
     statuses = [
         (r.log_time_ns, r.message)
         for r in iter_log(log, ["/ur5_0/planner/status"])
@@ -198,7 +200,7 @@ def test_the_other_arm_keeps_planning_around_it(run: Run) -> None:
 
 def test_a_sigkilled_recorder_log_is_recovered_by_the_command(run: Run) -> None:
     assert run.codes["recorder_b"] == -signal.SIGKILL
-    broken, fixed = run.out / "recorder_b.mcap", run.out / "recorder_b_fixed.mcap"
+    broken, fixed = run.out / "recorder_b", run.out / "recorder_b_fixed"
     with pytest.raises(LogFileError, match=r"nehmo_core\.logs\.recover"):
         read_log(broken)
     command = [sys.executable, "-m", "nehmo_core.logs.recover", str(broken), str(fixed)]
@@ -212,7 +214,7 @@ def test_a_sigkilled_recorder_log_is_recovered_by_the_command(run: Run) -> None:
     # there: compare with recorder A, which heard the same publishers.
     cut = run.t_kill_recorder - 1_000_000_000
     for arm_id in ("ur5_0", "ur5_1"):
-        a = [t for t, _ in _states(run.out / "recorder_a.mcap", arm_id) if t < cut]
+        a = [t for t, _ in _states(run.out / "recorder_a", arm_id) if t < cut]
         b = [t for t, _ in _states(fixed, arm_id) if t < cut]
         assert len(b) >= len(a) - 2, (arm_id, len(a), len(b))
     recovered = read_log(fixed)

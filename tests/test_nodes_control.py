@@ -432,10 +432,10 @@ def test_fault_injection_values_are_checked(text: str, rule: str) -> None:
 
 
 def test_fault_injection_is_off_by_default() -> None:
-    from nehmo_ros.arm_planner import DEFAULTS
+    from nehmo_ros.arm_planner import PARAMS
     from nehmo_ros.fault_injection import parse_fault
 
-    assert DEFAULTS["fault_injection"] == "" and parse_fault("") is None
+    assert PARAMS["fault_injection"].default == "" and parse_fault("") is None
 
 
 def test_solver_raise_ends_in_the_planners_own_fail_safe() -> None:

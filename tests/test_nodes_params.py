@@ -21,7 +21,16 @@ CASES = [
         ["cell:=dual_ur5", "arm_id:=ur5_0", "planner:=magic"],
         "unknown planner 'magic'",
     ),
-    ("nehmo_ros.arm_planner", ["cell:=dual_ur5", "arm_id:=ur5_0", "rate:=25"], "`rate`"),
+    (
+        "nehmo_ros.arm_planner",
+        ["cell:=dual_ur5", "arm_id:=ur5_0", "rate:=25"],
+        "`rate` must be of type float; got 25",
+    ),
+    (
+        "nehmo_ros.arm_planner",
+        ["cell:=dual_ur5", "arm_id:=ur5_0", "rate:=2000.0"],
+        "`rate` must lie in [0.001, 1000]; got 2000.0",
+    ),
     ("sim_bridge.bridge", ["cell:=dual_ur5", "physics_rate:=-5.0"], "`physics_rate` must be"),
     ("sim_bridge.bridge", ["cell:=no_such_cell"], "unknown cell 'no_such_cell'"),
     (
@@ -29,10 +38,10 @@ CASES = [
         ["cell:=dual_ur5", "real_time_factor:=2.0"],
         "`real_time_factor` must be 1 without sim_time",
     ),
-    ("nehmo_ros.recorder", ["cell:=dual_ur5", "output:=run.txt"], "`output` must be a path"),
+    ("nehmo_ros.recorder", ["cell:=dual_ur5", "output:=run.mcap"], "`output` must name a bag"),
     (
         "nehmo_ros.recorder",
-        ["cell:=dual_ur5", "output:=run.mcap", "flush_interval:=-0.5"],
+        ["cell:=dual_ur5", "output:=run_bag", "flush_interval:=-0.5"],
         "`flush_interval` must be > 0; got -0.5",
     ),
 ]
@@ -47,6 +56,7 @@ CASES = [
         "epsilon",
         "planner",
         "rate_type",
+        "rate_range",
         "bridge",
         "cell",
         "rtf",
@@ -74,8 +84,9 @@ def test_invalid_parameter_stops_the_node_with_one_line(
         (["-p", "cell"], {}, "-p expects NAME:=VALUE; got 'cell'"),
         (["-p"], {}, "-p needs an argument"),
         (["-p", "cell:=dual_ur5"], {"ROS_DOMAIN_ID": "999"}, "ROS_DOMAIN_ID must be an integer"),
+        (["-r", "a"], {}, "Couldn't parse remap rule"),
     ],
-    ids=["no_value", "no_rule", "domain_id"],
+    ids=["no_value", "no_rule", "domain_id", "remap"],
 )
 @pytest.mark.parametrize(
     ("module", "program"), [("nehmo_ros.recorder", "recorder"), ("sim_bridge.bridge", "sim_bridge")]
@@ -83,7 +94,7 @@ def test_invalid_parameter_stops_the_node_with_one_line(
 def test_bad_ros_arguments_stop_the_node_with_one_line(
     module: str, program: str, args: list[str], env: dict[str, str], expected: str
 ) -> None:
-    """Errors of ``ros.init`` (the ``--ros-args`` section, the DDS domain) too."""
+    """Errors of ``rclpy.init`` (the ``--ros-args`` section, the DDS domain) too."""
     argv = [sys.executable, "-m", module, "--ros-args", *args]
     proc = subprocess.run(argv, env=child_env(**env), capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2, proc.stderr

@@ -10,7 +10,8 @@ import pytest
 from _ros_testutil import in_process
 
 from nehmo_core.logs import command_topic
-from nehmo_ros import ros
+import rclpy.node
+from std_msgs.msg import Float64MultiArray
 from nehmo_ros.arm_planner import ArmPlannerNode
 
 
@@ -20,15 +21,15 @@ def test_a_raising_tick_commands_zero_reports_once_and_the_timer_goes_on(
     params = ["cell:=dual_ur5", "arm_id:=ur5_0", "planner:=naive"]
     with in_process("arm_planner", params) as nodes:
         planner = ArmPlannerNode()
-        listener = ros.Node("listener")
+        listener = rclpy.node.Node("listener")
         commands: list[list[float]] = []
         listener.create_subscription(
-            ros.msg.Float64MultiArray,
+            Float64MultiArray,
             command_topic("ur5_0"),
             lambda msg: commands.append(list(msg.data)),
             10,
         )
-        nodes.add(planner.node)
+        nodes.add(planner)
         nodes.add(listener)
         ticks = [0]
 

@@ -22,7 +22,8 @@ from _ros_testutil import in_process
 import nehmo_core.logs.writer as writer_module
 from nehmo_core.logs import JointState, joint_states_topic, read_log
 from nehmo_core.logs.recover import recover
-from nehmo_ros import ros
+import rclpy.node
+from sensor_msgs.msg import JointState as RosJointState
 from nehmo_ros.recorder import RecorderNode
 
 TOPIC = joint_states_topic("ur5_0")
@@ -80,19 +81,19 @@ def rig(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Rig]:
         return io.BufferedWriter(devices[-1])
 
     monkeypatch.setattr(writer_module, "open", open_on_device, raising=False)
-    path = tmp_path / "run.mcap"
+    path = tmp_path / "run"
     params = ["cell:=dual_ur5", f"output:={path}", "flush_every:=5", "flush_interval:=0.2"]
     with in_process("recorder", params) as nodes:
         recorder = RecorderNode()
-        talker = ros.Node("talker")
-        pub = talker.create_publisher(ros.msg.JointState, TOPIC, 100)
-        nodes.add(recorder.node)
+        talker = rclpy.node.Node("talker")
+        pub = talker.create_publisher(RosJointState, TOPIC, 100)
+        nodes.add(recorder)
         nodes.add(talker)
 
         def burst(first: int, count: int) -> None:
             """Messages ``first`` … at 100 Hz, then 0.5 s (2.5 flush intervals) of silence."""
             for k in range(first, first + count):
-                pub.publish(JointState(name=["a"], position=[float(k)] + [0.0] * WIDTH))
+                pub.publish(RosJointState(name=["a"], position=[float(k)] + [0.0] * WIDTH))
                 nodes.spin(0.01)
             nodes.spin(0.5)
 
@@ -117,7 +118,7 @@ def test_a_full_disk_is_reported_and_the_log_before_it_recovers(
     out = capfd.readouterr()
     assert "No space left on device" in out.err
     assert f"repair it with: python -m nehmo_core.logs.recover {rig.path}" in out.err
-    fixed = tmp_path / "fixed.mcap"
+    fixed = tmp_path / "fixed"
     report = recover(rig.path, fixed)
     assert not report.complete and report.stopped_by
     assert _firsts(fixed) == [float(k) for k in range(10)]
@@ -138,7 +139,7 @@ def test_a_chunk_torn_by_a_full_disk_ends_a_recovery_instead_of_passing_garbage_
     assert _firsts(rig.path) == [float(k) for k in (*range(10), *range(30, 40))]
     # A sequential recovery cannot step over the torn chunk (its length field runs into the
     # next records): its checksum ends the recovery there, and every message kept is whole.
-    fixed = tmp_path / "fixed.mcap"
+    fixed = tmp_path / "fixed"
     report = recover(rig.path, fixed)
     assert "crc" in report.stopped_by.lower()
     assert _firsts(fixed) == [float(k) for k in range(10)]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from nehmo_core.demo import main as demo_main
+from nehmo_ros.demo import main as demo_main
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_ros.orchestrate import SuiteSettings
 

@@ -15,12 +15,6 @@ from nehmo_core.errors import NehmoError
 
 # sub-command: (module, add-arguments function, run function, help).
 _COMMANDS: dict[str, tuple[str, str, str, str]] = {
-    "demo": (
-        "nehmo_core.demo",
-        "add_arguments",
-        "run",
-        "a dual-UR5 episode through the ROS 2 node suite",
-    ),
     "distance": (
         "nehmo_core.geometry.distance_cli",
         "add_arguments",
@@ -31,7 +25,7 @@ _COMMANDS: dict[str, tuple[str, str, str, str]] = {
         "nehmo_core.eval.cli",
         "add_arguments",
         "run",
-        "evaluate planners on the paper's setups (metrics from MCAP logs)",
+        "evaluate planners on the paper's setups (metrics from the logs)",
     ),
     "train": (
         "nehmo_core.hjr.train",

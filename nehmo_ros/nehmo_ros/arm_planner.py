@@ -44,15 +44,23 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.eval.telemetry import status_message
-from nehmo_core.logs.messages import DiagnosticStatus, KeyValue, serialize
+from nehmo_core.eval.telemetry import stamp, status_message
+from nehmo_core.logs import messages as log_msgs
 from nehmo_core.logs.topics import command_topic, goal_topic, joint_states_topic, status_topic
 from nehmo_core.planning.settings import PlannerSettings
-from nehmo_ros import ros
 from nehmo_ros.control import ArmController, ControlSettings, Decision
 from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
 from nehmo_ros.node_support import (
+    Param,
     declare_parameters,
     load_cell_parameter,
     require_text,
@@ -61,50 +69,64 @@ from nehmo_ros.node_support import (
 from nehmo_ros.planners import build_planner, warm_up
 
 #: Goals and the scenario are latched (transient local): a late subscriber still gets them.
-LATCHED = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: The diagnostics convention (diagnostic_aggregator, rqt_robot_monitor, Foxglove).
+DIAGNOSTICS_TOPIC = "/diagnostics"
 
-DEFAULTS: dict[str, Any] = {
-    "arm_id": "",
-    "cell": "",
-    "planner": "nehmo",
-    "model": "shipped",
-    "rate": 25.0,
-    "t_plan": 0.1,
-    "t_safe": 0.3,
-    "epsilon": 0.05,
-    "u_max": 0.5,
-    "d_max": 0.5,
-    "solver": "sqp",
-    "self_clearance": True,
-    "escape": True,
-    "deadline": 0.0,
-    "peer_timeout": 0.25,
-    "stale_policy": "hold",
-    "jump_margin": 0.1,
-    "allow_unmodelled": False,
-    "fault_injection": "",
+_PLANNER = PlannerSettings()
+PARAMS: dict[str, Param] = {
+    "arm_id": Param("", "id of the arm this node commands (one of the cell's arms)"),
+    "cell": Param("", "shipped cell name (dual_ur5, ...) or a cell YAML path"),
+    "planner": Param(
+        "nehmo", "nehmo | nehmo_paper | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless"
+    ),
+    "model": Param("shipped", "shipped | synthetic | [KIND=]PATH,... (run dir or .safetensors)"),
+    "rate": Param(25.0, "[Hz] command rate", 1e-3, 1000.0),
+    "t_plan": Param(_PLANNER.t_plan, "[s] planning horizon (command hold time in Opt)"),
+    "t_safe": Param(_PLANNER.t_safe, "[s] time-to-go at which V must stay >= epsilon"),
+    "epsilon": Param(_PLANNER.epsilon, "[m] safety margin on V"),
+    "u_max": Param(_PLANNER.u_max, "[rad/s] own joint speed bound"),
+    "d_max": Param(_PLANNER.d_max, "[rad/s] peers' joint speed bound (worst case)"),
+    "solver": Param(_PLANNER.solver, "sqp | ipopt"),
+    "self_clearance": Param(_PLANNER.self_clearance, "self-collision rows in Opt and fail-safe"),
+    "escape": Param(_PLANNER.escape, "stall escape and yield at the goal"),
+    "deadline": Param(0.0, "[s] solve budget; 0: 75 % of the period", 0.0, 10.0),
+    "peer_timeout": Param(0.25, "[s] a joint state older than this is stale", 0.0, 60.0),
+    "stale_policy": Param("hold", "hold | fail_safe: what a stale or untrusted peer triggers"),
+    "jump_margin": Param(0.1, "[rad] slack of the test flagging states faster than d_max"),
+    "allow_unmodelled": Param(False, "accept peers in reach that no pair model covers"),
+    "fault_injection": Param("", "tests only: raise | solver_raise | hang | slow; '' = off"),
 }
 #: Seconds between two WARN lines of one cause.
 WARN_EVERY = 2.0
 #: History of the command and status publishers (reliable, keep last): 2 s at 25 Hz, so a
 #: recorder that stalls for up to 2 s (CPU starved) loses nothing.
 HISTORY = 50
+#: Ticks between two statuses on ``/diagnostics`` while all is OK (1 Hz at 25 Hz); a WARN or
+#: ERROR status goes out at once.
+DIAGNOSTICS_EVERY = 25
 
 
-def _level(decision: Decision) -> bytes:
+def _level(decision: Decision) -> int:
+    levels = log_msgs.DiagnosticStatus
     if decision.error or decision.status in ("no_own_state", "non_finite_command"):
-        return ros.msg.DiagnosticStatus.ERROR
+        return int(levels.ERROR)
     if decision.fail_safe or decision.hold or decision.stale or decision.untrusted:
-        return ros.msg.DiagnosticStatus.WARN
-    return ros.msg.DiagnosticStatus.OK
+        return int(levels.WARN)
+    return int(levels.OK)
 
 
-class ArmPlannerNode:
-    """The node: parameters → planner → controller; timer, subscriptions, publishers."""
+class ArmPlannerNode(Node):
+    """The node: parameters → planner → controller; timer, subscriptions, publishers.
+
+    Callback groups: the 25 Hz timer has its own, the solve (a guard condition triggered by
+    the tick) its own, the subscriptions a reentrant one; in a multi-threaded executor the
+    timer keeps commanding while the solve runs and joint states keep arriving.
+    """
 
     def __init__(self) -> None:
-        self.node = ros.Node("arm_planner")
-        p = declare_parameters(self.node, DEFAULTS)
+        super().__init__("arm_planner")
+        p = declare_parameters(self, PARAMS)
         self.cell = load_cell_parameter(p["cell"])
         arm_id = require_text("arm_id", p["arm_id"], f"one of the cell's arms {self.cell.arm_ids}")
         if arm_id not in self.cell.arm_ids:
@@ -142,47 +164,60 @@ class ArmPlannerNode:
         )
         unmodelled = getattr(planner, "peers_unmodelled", ())
         if unmodelled:
-            self.node.get_logger().warning(f"peers {list(unmodelled)} are NOT constrained")
+            self.get_logger().warning(f"peers {list(unmodelled)} are NOT constrained")
         warm_up(planner, self.cell, arm_id)
         self.fault = ""
         if fault is not None:
             planner = FaultInjectingPlanner(planner, fault)
             self.fault = str(fault)
-            self.node.get_logger().warning(
+            self.get_logger().warning(
                 f"fault_injection={self.fault} is ON: this node fails on purpose (tests only)"
             )
-        self.controller = ArmController(self.cell, arm_id, planner, control)
+        self._solve_group = MutuallyExclusiveCallbackGroup()
+        self._solve_trigger = self.create_guard_condition(
+            self._on_solve, callback_group=self._solve_group
+        )
+        self.controller = ArmController(
+            self.cell, arm_id, planner, control, wake=self._solve_trigger.trigger
+        )
         self.robot = self.cell.arm(arm_id).robot
         self.kind = p["planner"]
         self._last_publish: float | None = None
         self._ready = False
+        self._diagnostics_due = 0
         #: Messages published and joint states received (printed at the stop, for load tests).
         self.published = {"commands": 0, "statuses": 0}
         self.received: dict[str, int] = dict.fromkeys(self.cell.arm_ids, 0)
 
-        n = self.node
-        self.command_pub = n.create_publisher(
-            ros.msg.Float64MultiArray, command_topic(arm_id), HISTORY
-        )
-        self.status_pub = n.create_publisher(
-            ros.msg.DiagnosticStatus, status_topic(arm_id), HISTORY
-        )
+        self.command_pub = self.create_publisher(Float64MultiArray, command_topic(arm_id), HISTORY)
+        self.status_pub = self.create_publisher(DiagnosticStatus, status_topic(arm_id), HISTORY)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, HISTORY)
+        inputs = ReentrantCallbackGroup()
         for other in self.cell.arm_ids:
-            n.create_subscription(
-                ros.msg.JointState,
+            self.create_subscription(
+                JointState,
                 joint_states_topic(other),
                 self._state_callback(other),
-                ros.qos_profile_sensor_data,
+                qos_profile_sensor_data,
+                callback_group=inputs,
             )
-        n.create_subscription(ros.msg.JointState, goal_topic(arm_id), self._on_goal, LATCHED)
-        self.timer = n.create_timer(control.period, self._on_tick)
-        n.get_logger().info(
+        self.create_subscription(
+            JointState, goal_topic(arm_id), self._on_goal, LATCHED, callback_group=inputs
+        )
+        self.timer = self.create_timer(
+            control.period, self._on_tick, callback_group=MutuallyExclusiveCallbackGroup()
+        )
+        self.get_logger().info(
             f"arm {arm_id} of cell {self.cell.name}: planner {p['planner']} (model "
             f"{p['model']}), {rate:g} Hz, deadline {deadline * 1e3:.1f} ms, peers "
-            f"{list(self.controller.peer_ids)}, runtime {ros.RUNTIME}"
+            f"{list(self.controller.peer_ids)}, rmw {rclpy.get_rmw_implementation_identifier()}"
         )
 
     # -- callbacks ----------------------------------------------------------------------------
+    def _on_solve(self) -> None:
+        """The solve of the latest tick (guard condition, in the solve's callback group)."""
+        self.controller.run_pending_solve()
+
     def _state_callback(self, arm_id: str) -> Callable[[Any], None]:
         return lambda msg: self._on_state(arm_id, msg)
 
@@ -199,13 +234,13 @@ class ArmPlannerNode:
             return
         untrusted = f"; {arm_id} untrusted for {self.controller.settings.peer_timeout:g} s"
         if note.startswith("rejected"):
-            self.node.get_logger().warning(
+            self.get_logger().warning(
                 f"joint state of {arm_id} {note} ({self.controller.states.rejected[arm_id]} "
                 f"rejected){untrusted}",
                 throttle_duration_sec=WARN_EVERY,
             )
         else:
-            self.node.get_logger().warning(
+            self.get_logger().warning(
                 f"joint state of {arm_id} {note} ({self.controller.states.jumps[arm_id]} jumps)"
                 f"{untrusted}",
                 throttle_duration_sec=WARN_EVERY,
@@ -215,11 +250,11 @@ class ArmPlannerNode:
         try:
             goal = self.controller.set_goal(msg.name, msg.position)
         except Exception as err:  # InvalidValueError, or a malformed message
-            self.node.get_logger().error(
+            self.get_logger().error(
                 f"rejected goal: {err}; keeping the previous goal", throttle_duration_sec=WARN_EVERY
             )
             return
-        self.node.get_logger().info(
+        self.get_logger().info(
             f"goal {[round(float(x), 3) for x in goal]}", throttle_duration_sec=5.0
         )
 
@@ -227,40 +262,51 @@ class ArmPlannerNode:
         try:
             self._tick()
         except Exception as err:  # a bug here must not end the node: stop the arm, report
-            self.node.get_logger().error(
+            self.get_logger().error(
                 f"tick failed ({type(err).__name__}: {err}); commanding zero velocity",
                 throttle_duration_sec=WARN_EVERY,
             )
-            command = ros.msg.Float64MultiArray()
-            command.data = [0.0] * self.robot.dof
+            command = Float64MultiArray(data=[0.0] * self.robot.dof)
             self.command_pub.publish(command)
             self.published["commands"] += 1
 
     def _tick(self) -> None:
         now = time.monotonic()
-        stamp_ns = self.node.get_clock().now().nanoseconds
+        stamp_ns = self.get_clock().now().nanoseconds
         decision = self.controller.tick(now, stamp_ns)
         if not self._ready:
             if not decision.ready:  # nothing to command yet: the bridge's watchdog holds the arm
-                self.node.get_logger().info(
+                self.get_logger().info(
                     f"waiting ({decision.status})", throttle_duration_sec=2.0
                 )
                 return
             self._ready = True
-            self.node.get_logger().info("planning")
-        command = ros.msg.Float64MultiArray()
-        command.data = [float(u) for u in decision.velocity]
+            self.get_logger().info("planning")
+        command = Float64MultiArray(data=[float(u) for u in decision.velocity])
         self.command_pub.publish(command)
         self.published["commands"] += 1
         period = math.nan if self._last_publish is None else now - self._last_publish
         self._last_publish = now
-        self.status_pub.publish(serialize(self._status(decision, period, time.time_ns())))
+        status = self._status(decision, period, time.time_ns())
+        self.status_pub.publish(log_msgs.serialize(status))
         self.published["statuses"] += 1
+        self._publish_diagnostics(status, stamp_ns)
         self._report(decision)
+
+    def _publish_diagnostics(self, status: Any, stamp_ns: int) -> None:
+        """The status on ``/diagnostics`` too, at most every ``DIAGNOSTICS_EVERY`` ticks."""
+        self._diagnostics_due -= 1
+        if self._diagnostics_due > 0 and int(status.level) == 0:
+            return
+        self._diagnostics_due = DIAGNOSTICS_EVERY
+        array = log_msgs.DiagnosticArray(
+            header=log_msgs.Header(stamp=stamp(stamp_ns)), status=[status]
+        )
+        self.diagnostics_pub.publish(log_msgs.serialize(array))
 
     def _report(self, d: Decision) -> None:
         """WARN lines for faults, at most one per cause every ``WARN_EVERY`` s."""
-        log, c = self.node.get_logger(), self.controller.counters
+        log, c = self.get_logger(), self.controller.counters
         if d.error or d.status.startswith("failed"):
             log.warning(
                 f"solver failed ({d.error or d.status}); commanding "
@@ -287,7 +333,7 @@ class ArmPlannerNode:
                 throttle_duration_sec=WARN_EVERY,
             )
 
-    def _status(self, d: Decision, period: float, wall_ns: int) -> DiagnosticStatus:
+    def _status(self, d: Decision, period: float, wall_ns: int) -> Any:
         """The evaluation's status message (telemetry) plus the node's own counters."""
         msg = status_message(self.arm_id, self.kind, self.controller.telemetry(d), d.observation_ns)
         c = self.controller.counters
@@ -315,16 +361,15 @@ class ArmPlannerNode:
         # the state ages of the observation this command was computed from
         extra.update({f"age_{a}": f"{age:.4f}" for a, age in d.ages.items()})
         msg.level = _level(d)
-        msg.values += [KeyValue(key=k, value=str(v)) for k, v in extra.items()]
+        msg.values += [log_msgs.KeyValue(key=k, value=str(v)) for k, v in extra.items()]
         return msg
 
     def on_stop(self) -> None:
         """Command a stop once (if the middleware is still up) and end the worker thread."""
         self.timer.cancel()
         self.controller.stop()
-        if ros.ok():
-            command = ros.msg.Float64MultiArray()
-            command.data = [0.0] * self.robot.dof
+        if rclpy.ok():
+            command = Float64MultiArray(data=[0.0] * self.robot.dof)
             self.command_pub.publish(command)
             self.published["commands"] += 1
         c = self.controller.counters
@@ -342,7 +387,7 @@ class ArmPlannerNode:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `arm_planner` console script."""
     sys.setswitchinterval(5e-4)  # the timer thread gets the GIL back from the solver quickly
-    return run_main("arm_planner", ArmPlannerNode, argv, usage=__doc__)
+    return run_main("arm_planner", ArmPlannerNode, argv, usage=__doc__, threads=3)
 
 
 if __name__ == "__main__":

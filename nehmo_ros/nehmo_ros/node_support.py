@@ -1,31 +1,43 @@
-"""What the NeHMO nodes share: parameter reading, one-line start-up errors, a clean stop.
+"""What the NeHMO nodes share: declared parameters, one-line start-up errors, a clean stop.
 
 Every node's ``main()`` goes through :func:`run_main`: bad parameters, a malformed
 ``--ros-args`` section, a bad ``ROS_DOMAIN_ID`` (or a bad cell file, model, scenario ...) print
-``<node>: error: <one line naming the parameter, rule and value>`` and exit with status 2;
-SIGINT/SIGTERM stop the spin loop and call the node's ``on_stop`` while the middleware is still
-up (so a last command or the log's summary still goes out), then the node is destroyed and the
-context shut down.
+``<node>: error: <one line naming the parameter, rule and value>`` and exit with status 2.
+The node spins in a :class:`rclpy.executors.MultiThreadedExecutor`. SIGINT/SIGTERM stop the spin
+loop and call the node's ``on_stop`` while the middleware is still up (so a last command or the
+log's summary still goes out), then the node is destroyed and the context shut down.
 """
 
 from __future__ import annotations
 
+import contextlib
 import gc
+import math
+import os
 import signal
 import sys
+import tempfile
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any, Protocol
+
+import rclpy
+import rclpy.exceptions
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.robots import load_cell
 from nehmo_core.robots.model import Cell
-from nehmo_ros import ros
 from nehmo_ros.oneline import one_line
 
 __all__ = [
     "NODE_ERRORS",
+    "Param",
     "StoppableNode",
     "declare_parameters",
     "load_cell_parameter",
@@ -34,21 +46,84 @@ __all__ = [
 ]
 
 #: Errors that mean "bad input at start-up": printed as one line, exit status 2.
-NODE_ERRORS: tuple[type[BaseException], ...] = (*ros.PARAMETER_ERRORS, NehmoError, OSError)
+NODE_ERRORS: tuple[type[BaseException], ...] = (
+    rclpy.exceptions.ParameterException,
+    rclpy.exceptions.InvalidParameterException,
+    rclpy.exceptions.InvalidParameterValueException,
+    rclpy.exceptions.InvalidParameterTypeException,
+    rclpy.exceptions.ParameterUninitializedException,
+    NehmoError,
+    OSError,
+    ValueError,
+)
+#: What ``rclpy.init`` raises for a bad ``--ros-args`` section (rcl's RCLError and
+#: UnknownROSArgsError derive from RuntimeError).
+INIT_ERRORS: tuple[type[BaseException], ...] = (ValueError, RuntimeError)
+
+#: The largest ROS_DOMAIN_ID whose DDS ports exist (ROS 2's documented limit).
+MAX_DOMAIN_ID = 232
+
+
+@dataclass(frozen=True)
+class Param:
+    """One node parameter: default, description and (for numbers) the inclusive range.
+
+    Parameters are read once at start, so they are declared read-only: a value comes from
+    ``--ros-args -p`` or ``--params-file`` and ``ros2 param set`` is refused.
+    """
+
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+
+    def descriptor(self) -> ParameterDescriptor:
+        d = ParameterDescriptor(description=self.description, read_only=True)
+        if self.low is None or self.high is None:
+            return d
+        if isinstance(self.default, bool):
+            return d
+        if isinstance(self.default, int):
+            d.integer_range = [IntegerRange(from_value=int(self.low), to_value=int(self.high))]
+        elif isinstance(self.default, float):
+            d.floating_point_range = [
+                FloatingPointRange(from_value=float(self.low), to_value=float(self.high))
+            ]
+        return d
 
 
 class StoppableNode(Protocol):
-    """A node object with the hooks :func:`run_main` uses (an optional ``finished`` property
-    ends the spin loop as a signal does)."""
-
-    node: Any
+    """A node with the hooks :func:`run_main` uses (an optional ``finished`` property ends the
+    spin loop as a signal does)."""
 
     def on_stop(self) -> None: ...
 
 
-def declare_parameters(node: Any, defaults: Mapping[str, Any]) -> dict[str, Any]:
-    """Declare every parameter with its default and return the values in force."""
-    return {name: node.declare_parameter(name, value).value for name, value in defaults.items()}
+def declare_parameters(node: Node, params: Mapping[str, Param]) -> dict[str, Any]:
+    """Declare every parameter with its descriptor and return the values in force.
+
+    A value of the wrong type or out of its range stops the node with an error naming the
+    parameter, the rule and the value (rclpy's own check, worded as ours).
+    """
+    values = {}
+    for name, p in params.items():
+        try:
+            values[name] = node.declare_parameter(name, p.default, p.descriptor()).value
+        except rclpy.exceptions.InvalidParameterTypeException:
+            raise InvalidValueError(
+                name, f"must be of type {type(p.default).__name__}", _override(node, name, "?")
+            ) from None
+        except rclpy.exceptions.InvalidParameterValueException:
+            raise InvalidValueError(
+                name, f"must lie in [{p.low:g}, {p.high:g}]", _override(node, name, None)
+            ) from None
+    return values
+
+
+def _override(node: Node, name: str, fallback: Any) -> Any:
+    """The value given for ``name`` on the command line or in a params file."""
+    overrides = getattr(node, "_parameter_overrides", {})
+    return overrides[name].value if name in overrides else fallback
 
 
 def require_text(name: str, value: str, hint: str) -> str:
@@ -58,18 +133,47 @@ def require_text(name: str, value: str, hint: str) -> str:
     return value.strip()
 
 
+def require_positive(name: str, value: float) -> float:
+    """``value`` if it is finite and > 0, else an error naming ``name``."""
+    if not (math.isfinite(float(value)) and float(value) > 0):
+        raise InvalidValueError(name, "must be > 0", value)
+    return float(value)
+
+
 def load_cell_parameter(value: str) -> Cell:
     """The cell of parameter ``cell``: a shipped name (dual_ur5, ...) or a YAML path."""
     return load_cell(require_text("cell", value, "a shipped cell name or a cell YAML path"))
+
+
+def check_ros_arguments(args: Sequence[str]) -> None:
+    """Reject what rcl would reject with a multi-line report, as one line.
+
+    Checks the ``-p``/``--param`` rules of the ``--ros-args`` sections and ``ROS_DOMAIN_ID``;
+    rcl checks the rest at ``rclpy.init``.
+    """
+    domain = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if domain and not (domain.isdigit() and int(domain) <= MAX_DOMAIN_ID):
+        raise ValueError(f"ROS_DOMAIN_ID must be an integer in 0..{MAX_DOMAIN_ID}; got {domain!r}")
+    ros_section = False
+    items = list(args)
+    for i, arg in enumerate(items):
+        if arg == "--ros-args":
+            ros_section = True
+        elif arg == "--":
+            ros_section = False
+        elif ros_section and arg in ("-p", "--param"):
+            if i + 1 >= len(items) or items[i + 1].startswith("-"):
+                raise ValueError(f"{arg} needs an argument NAME:=VALUE")
+            if ":=" not in items[i + 1]:
+                raise ValueError(f"{arg} expects NAME:=VALUE; got {items[i + 1]!r}")
 
 
 def settle_heap() -> None:
     """Collect once, then move every object alive now out of the collector's reach.
 
     A node holds a few hundred thousand long-lived objects (torch, CasADi, PyBullet bindings,
-    the models); a full collection walks all of them, ~50 ms here, stalling every thread of
-    the node at an arbitrary tick. After ``gc.freeze()`` collections only walk what was
-    allocated since (messages, telemetry), a fraction of a millisecond.
+    the models); a full collection walks all of them, ~50 ms, stalling every thread of the node
+    at an arbitrary tick. After ``gc.freeze()`` collections only walk what was allocated since.
     """
     gc.collect()
     gc.freeze()
@@ -77,29 +181,36 @@ def settle_heap() -> None:
 
 def run_main(
     program: str,
-    build: Callable[[], StoppableNode],
+    build: Callable[[], Node],
     argv: Sequence[str] | None,
-    executor: Any | None = None,
     drain_s: float = 0.0,
     usage: str | None = None,
+    threads: int = 2,
 ) -> int:
-    """Init the middleware, build the node, spin until SIGINT/SIGTERM, stop cleanly.
+    """Init rclpy, build the node, spin until SIGINT/SIGTERM, stop cleanly.
 
-    After the stop request the node spins ``drain_s`` more seconds (taking what is queued),
-    then ``on_stop`` runs while the middleware is still up. ``-h``/``--help`` among the
-    arguments before ``--ros-args`` prints ``usage`` (the node module's docstring) instead.
+    ``build`` returns an :class:`rclpy.node.Node` subclass with an ``on_stop()`` method. After
+    the stop request the node spins ``drain_s`` more seconds (taking what is queued), then
+    ``on_stop`` runs while the middleware is still up. ``-h``/``--help`` among the arguments
+    before ``--ros-args`` prints ``usage`` (the node module's docstring) instead.
     """
-    args = list(sys.argv[1:] if argv is None else argv)
+    args = [program, *(sys.argv[1:] if argv is None else argv)]
     own = args[: args.index("--ros-args")] if "--ros-args" in args else args
     if usage is not None and ("-h" in own or "--help" in own):
         print(usage.strip(), flush=True)
         return 0
     try:
         try:
-            ros.init(args=None if argv is None else [program, *argv])  # --ros-args, domain id
-            wrapper = build()
+            check_ros_arguments(args)
+            with _rcl_parse_report_dropped():
+                rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        except INIT_ERRORS as err:
+            print(f"{program}: error: {_describe(err)}", file=sys.stderr, flush=True)
+            return 2
+        try:
+            node = build()
         except NODE_ERRORS as err:
-            print(f"{program}: error: {one_line(err)}", file=sys.stderr, flush=True)
+            print(f"{program}: error: {_describe(err)}", file=sys.stderr, flush=True)
             return 2
         stop = threading.Event()
 
@@ -110,21 +221,51 @@ def run_main(
         if threading.current_thread() is threading.main_thread():
             for signum in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(signum, on_signal)
-        spinner = executor or ros.SingleThreadedExecutor()
-        spinner.add_node(wrapper.node)
+        executor = MultiThreadedExecutor(num_threads=threads)
+        executor.add_node(node)
         settle_heap()
         try:
-            while not stop.is_set() and ros.ok() and not getattr(wrapper, "finished", False):
-                spinner.spin_once(timeout_sec=0.05)
+            while not stop.is_set() and rclpy.ok() and not getattr(node, "finished", False):
+                executor.spin_once(timeout_sec=0.05)
             end = time.monotonic() + drain_s
-            while ros.ok() and time.monotonic() < end:
-                spinner.spin_once(timeout_sec=0.02)
-        except (KeyboardInterrupt, ros.ExternalShutdownException):
+            while rclpy.ok() and time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.02)
+        except (KeyboardInterrupt, ExternalShutdownException):
             pass
         finally:
-            wrapper.on_stop()
-            spinner.remove_node(wrapper.node)
-            wrapper.node.destroy_node()
+            node.on_stop()  # type: ignore[attr-defined]
+            executor.remove_node(node)
+            executor.shutdown(timeout_sec=1.0)
+            node.destroy_node()
         return 0
     finally:
-        ros.try_shutdown()
+        rclpy.try_shutdown()
+
+
+@contextlib.contextmanager
+def _rcl_parse_report_dropped() -> Iterator[None]:
+    """rcl logs "Failed to parse global arguments" to stderr before raising; the exception
+    says more, so that line is dropped (anything else rcl writes passes through)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            captured.seek(0)
+            for line in captured.read().decode(errors="replace").splitlines():
+                if "Failed to parse global arguments" not in line:
+                    print(line, file=sys.stderr)
+
+
+def _describe(err: BaseException) -> str:
+    """One line for a start-up error (rcl's messages carry a source location: cut it)."""
+    text = one_line(err)
+    if type(err).__name__ == "UnknownROSArgsError":
+        return f"unknown ROS argument {text.strip('[]')}"
+    if ", at /" in text:
+        text = text.split(", at /", 1)[0]
+    return text

@@ -1,22 +1,24 @@
-"""`orchestrate`: run the ROS node suite as separate processes, evaluate from the MCAP logs.
+"""`orchestrate`: run the ROS node suite as separate processes, evaluate from the bags.
 
     orchestrate run --cell dual_ur5 --seed 0 --count 3 --planner nehmo --model synthetic --out out/
     orchestrate run --scenarios set.json --episodes 0,2 --out out/
-    orchestrate evaluate out/episode_000.mcap out/episode_001.mcap
-    orchestrate replay out/episode_000.mcap --rate 2.0
+    orchestrate evaluate out/episode_000 out/episode_001
+    orchestrate replay out/episode_000 --rate 2.0
 
 ``run``: for every episode of the scenario set it starts the ``recorder`` (waits until it
 records), one ``arm_planner`` per arm and the ``sim_bridge`` (simulated time on ``/clock``,
-every node with ``use_sim_time``), each as its own process on the embedded runtime (or rclpy
-where installed), in a DDS domain of its own (``ROS_DOMAIN_ID``, loopback only). The bridge
+every node with ``use_sim_time``), each as its own rclpy process, in a DDS domain of its own
+(``ROS_DOMAIN_ID``) kept on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``). The bridge
 starts the episode once every planner is up and exits when it ends; then planners and recorder
-get SIGINT (SIGKILL after a bounded wait). Every episode log is evaluated with
+get SIGINT (SIGKILL after a bounded wait). Every episode bag (``<out>/episode_NNN/``, rosbag2
+layout) is evaluated with
 :mod:`nehmo_core.eval.metrics` (the batch runner's metrics); the per-episode results and the
 aggregate (SR, CR, planning time, MPL) go to ``<out>/summary.json``. Process output goes to
 ``<out>/logs/``.
 
-``replay`` republishes a log's topics with their recorded timing (scaled by ``--rate``), for
-inspection with other tools or re-recording; ``evaluate`` prints the metrics of logs.
+``replay`` republishes a bag's topics through rclpy with their recorded timing (scaled by
+``--rate``), for inspection with other tools or re-recording; ``evaluate`` prints the metrics of
+bags.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -112,7 +115,8 @@ def child_env(settings: SuiteSettings, domain_id: int) -> dict[str, str]:
             "MKL_NUM_THREADS": "1",
         }
     )
-    env.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)  # loopback only
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # this machine only, unless overridden
+    env.pop("ROS_STATIC_PEERS", None)
     env.update(settings.env)
     return env
 
@@ -180,6 +184,7 @@ class EpisodeRun:
     exit_codes: dict[str, int | None]
     wall_seconds: float
     error: str = ""
+    rmw: str = ""  # the middleware the nodes reported at start
 
 
 @contextmanager
@@ -205,10 +210,11 @@ def run_episode(
     domain_id = settings.domain_id if settings.domain_id is not None else isolated_domain()
     env = child_env(settings, domain_id)
     stem = f"episode_{episode:03d}"
-    log_path = out_dir / f"{stem}.mcap"
+    log_path = out_dir / stem
     logs = out_dir / "logs" / stem
     logs.mkdir(parents=True, exist_ok=True)
-    log_path.unlink(missing_ok=True)
+    if log_path.is_dir():
+        shutil.rmtree(log_path)
     sim = {"use_sim_time": True}
     start = time.monotonic()
     codes: dict[str, int | None] = {}
@@ -261,14 +267,25 @@ def run_episode(
                 codes[p.name] = p.stop(settings.stop_timeout)
         failed = {n: c for n, c in codes.items() if c != 0}
     wall = time.monotonic() - start
+    rmw = reported_rmw(bridge.output())
     if failed:
         detail = "; ".join(f"{n}: exit {c}" for n, c in failed.items())
-        return EpisodeRun(episode, log_path, None, codes, wall, f"processes failed ({detail})")
+        return EpisodeRun(
+            episode, log_path, None, codes, wall, f"processes failed ({detail})", rmw
+        )
     try:
         result = evaluate_log(log_path)
     except NehmoError as exc:
-        return EpisodeRun(episode, log_path, None, codes, wall, str(exc))
-    return EpisodeRun(episode, log_path, result, codes, wall)
+        return EpisodeRun(episode, log_path, None, codes, wall, str(exc), rmw)
+    return EpisodeRun(episode, log_path, result, codes, wall, rmw=rmw)
+
+
+def reported_rmw(output: str) -> str:
+    """The middleware a node named in its start-up line (``... rmw <name>``), or ''."""
+    for line in output.splitlines():
+        if ", rmw " in line:
+            return line.rsplit(", rmw ", 1)[1].split()[0].strip(")")
+    return ""
 
 
 def run_suite(
@@ -286,6 +303,7 @@ def run_suite(
         "scenarios": str(scenario_file),
         "planner": settings.planner,
         "model": settings.model,
+        "rmw": next((r.rmw for r in runs if r.rmw), ""),
         "metrics": aggregate(results).to_dict() if results else None,
         "episodes": [
             {
@@ -321,27 +339,38 @@ def format_metrics(metrics: dict[str, Any] | None) -> str:
 
 # ----------------------------------------------------------------------------------- replay
 def replay(path: Path, rate: float, topics: Sequence[str] | None, domain_id: int | None) -> int:
-    """Republish the messages of a log with their recorded timing (× 1/rate)."""
+    """Republish the messages of a bag through rclpy with their recorded timing (× 1/rate).
+
+    The serialized bytes go out as recorded; goals and the scenario are latched as the bridge
+    publishes them.
+    """
+    import rclpy
+    from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+
     from nehmo_core.logs import iter_log
-    from nehmo_ros import ros
+    from nehmo_ros.recorder import is_latched, message_class
 
     if not rate > 0:
         raise InvalidValueError("rate", "must be > 0", rate)
     if domain_id is not None:
         os.environ["ROS_DOMAIN_ID"] = str(domain_id)
-    ros.init(args=["orchestrate_replay"])
-    node = ros.Node("nehmo_replay")
+    rclpy.init(args=["orchestrate_replay"])
+    node = Node("nehmo_replay")
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     pubs: dict[str, Any] = {}
     count, t0_log, t0_wall = 0, None, time.monotonic()
     try:
         for rec in iter_log(path, topics):
-            if not ros.ok():
+            if not rclpy.ok():
                 break
             if rec.topic not in pubs:
-                msg_class = getattr(ros.msg, rec.msgtype.rsplit("/", 1)[-1], None)
-                if msg_class is None:
+                try:
+                    msg_class = message_class(rec.msgtype)
+                except (ImportError, AttributeError, ValueError):
                     continue
-                pubs[rec.topic] = node.create_publisher(msg_class, rec.topic, 10)
+                qos = latched if is_latched(rec.topic) else 100
+                pubs[rec.topic] = node.create_publisher(msg_class, rec.topic, qos)
             t0_log = rec.log_time_ns if t0_log is None else t0_log
             due = t0_wall + (rec.log_time_ns - t0_log) / 1e9 / rate
             delay = due - time.monotonic()
@@ -353,7 +382,7 @@ def replay(path: Path, rate: float, topics: Sequence[str] | None, domain_id: int
         pass
     finally:
         node.destroy_node()
-        ros.try_shutdown()
+        rclpy.try_shutdown()
     print(f"replayed {count} messages on {len(pubs)} topics from {path}")
     return 0
 

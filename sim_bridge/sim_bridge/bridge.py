@@ -1,6 +1,6 @@
 """`sim_bridge` node: simulates a cell's arms (PyBullet, exact collisions) for the ROS suite.
 
-    ros2 run sim_bridge sim_bridge --ros-args -p cell:=dual_ur5 -p seed:=13
+    install/sim_bridge/lib/sim_bridge/sim_bridge --ros-args -p cell:=dual_ur5 -p seed:=13
 
 Every physics step (``physics_rate``, 100 Hz) it integrates each arm's latest velocity command
 with :class:`nehmo_core.sim.cell_sim.CellSimulator`, checks every arm pair and every arm's
@@ -48,13 +48,20 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.eval.episode_log import EPISODE_FORMAT, EPISODE_FORMAT_VERSION, cell_metadata
 from nehmo_core.eval.metrics import goal_distance
 from nehmo_core.eval.setups import SUCCESS_NORMS, parse_row
 from nehmo_core.eval.telemetry import collisions_message, stamp
-from nehmo_core.logs.messages import Clock, Header, JointState, String, serialize
+from nehmo_core.logs.messages import serialize
 from nehmo_core.logs.topics import (
     CLOCK_TOPIC,
     COLLISIONS_TOPIC,
@@ -70,36 +77,37 @@ from nehmo_core.sim.scenarios import (
     sample_scenario,
     scenario_rng,
 )
-from nehmo_ros import ros
-from nehmo_ros.node_support import declare_parameters, load_cell_parameter, run_main
+from nehmo_ros.node_support import Param, declare_parameters, load_cell_parameter, run_main
 from sim_bridge.broadphase import BroadPhaseSimulator
 
-DEFAULTS: dict[str, Any] = {
-    "cell": "",
-    "scenarios": "",
-    "episode": 0,
-    "seed": 0,
-    "index": 0,
-    "physics_rate": 100.0,
-    "control_rate": 25.0,
-    "sim_time": False,
-    "real_time_factor": 1.0,
-    "command_timeout": 0.2,
-    "time_limit": 20.0,
-    "success_norm": "l2",
-    "success_tolerance": 0.1,
-    "stop_on_collision": True,
-    "stop_on_success": True,
-    "self_collision": True,
-    "wait_for_planners": True,
-    "start_timeout": 60.0,
-    "start_delay": 0.5,
-    "exit_when_done": False,
-    "planners": "",
+PARAMS: dict[str, Param] = {
+    "cell": Param("", "shipped cell name (dual_ur5, ...) or a cell YAML path"),
+    "scenarios": Param("", "scenario set JSON file ('' = draw from seed/index)"),
+    "episode": Param(0, "episode of the scenario set file"),
+    "seed": Param(0, "seed of the drawn scenario set"),
+    "index": Param(0, "scenario index within the seeded set"),
+    "physics_rate": Param(100.0, "[Hz] simulation step rate"),
+    "control_rate": Param(25.0, "[Hz] the planners' command rate (episode metadata)"),
+    "sim_time": Param(False, "publish simulated time on /clock"),
+    "real_time_factor": Param(1.0, "simulated seconds per wall second (with sim_time)"),
+    "command_timeout": Param(0.2, "[s] watchdog: an arm with an older command holds still"),
+    "time_limit": Param(20.0, "[s] episode length"),
+    "success_norm": Param("l2", "l2 | linf: the goal distance norm"),
+    "success_tolerance": Param(0.1, "[rad] goal distance that counts as reached"),
+    "stop_on_collision": Param(True, "end the episode at the first collision"),
+    "stop_on_success": Param(True, "end the episode when every arm is at its goal"),
+    "self_collision": Param(True, "check each arm's self-collision too"),
+    "wait_for_planners": Param(True, "start when every arm's command topic has a publisher"),
+    "start_timeout": Param(60.0, "[s] longest wait for the planners"),
+    "start_delay": Param(0.5, "[s] extra wait after the planners appear (discovery settles)"),
+    "exit_when_done": Param(False, "exit 0.5 s after the episode ends"),
+    "planners": Param("", "row of planner kinds for the metadata, e.g. nehmo or ur5_0=nehmo,ur5_1=naive"),
 }
+#: The parameters' defaults.
+DEFAULTS: dict[str, Any] = {name: p.default for name, p in PARAMS.items()}
 
 #: Goals and the scenario are latched (transient local): late subscribers still get them.
-LATCHED = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: History of the streaming publishers (reliable, keep last): 2 s at 100 Hz, so a reliable
 #: subscriber (the recorder) that stalls for up to 2 s (CPU starved) loses nothing.
 HISTORY = 200
@@ -184,12 +192,13 @@ def load_episode(cell: Cell, p: dict[str, Any]) -> tuple[Scenario, dict[str, Any
     return scenario, {"seed": seed, "index": index}
 
 
-class SimBridgeNode:
+class SimBridgeNode(Node):
     """The node: one simulator, a wall-clock timer stepping it, topics per arm."""
 
     def __init__(self) -> None:
-        self.node = n = ros.Node("sim_bridge")
-        p = declare_parameters(n, DEFAULTS)
+        super().__init__("sim_bridge")
+        n = self
+        p = declare_parameters(self, PARAMS)
         if n.get_parameter("use_sim_time").value:
             raise InvalidValueError(
                 "use_sim_time", "must be false for the bridge (it is the clock source)", True
@@ -219,17 +228,17 @@ class SimBridgeNode:
         self.metadata = self._metadata(kinds, source)
 
         self.state_pubs = {
-            a: n.create_publisher(ros.msg.JointState, joint_states_topic(a), HISTORY)
+            a: n.create_publisher(JointState, joint_states_topic(a), HISTORY)
             for a in self.cell.arm_ids
         }
         self.goal_pubs = {
-            a: n.create_publisher(ros.msg.JointState, goal_topic(a), LATCHED)
+            a: n.create_publisher(JointState, goal_topic(a), LATCHED)
             for a in self.cell.arm_ids
         }
-        self.scenario_pub = n.create_publisher(ros.msg.String, SCENARIO_TOPIC, LATCHED)
-        self.collision_pub = n.create_publisher(ros.msg.DiagnosticArray, COLLISIONS_TOPIC, HISTORY)
+        self.scenario_pub = n.create_publisher(String, SCENARIO_TOPIC, LATCHED)
+        self.collision_pub = n.create_publisher(DiagnosticArray, COLLISIONS_TOPIC, HISTORY)
         self.clock_pub = (
-            n.create_publisher(ros.msg.Clock, CLOCK_TOPIC, HISTORY) if self.s.sim_time else None
+            n.create_publisher(Clock, CLOCK_TOPIC, HISTORY) if self.s.sim_time else None
         )
         #: Each arm's latest command and when it came (seconds of ``_now``).
         self.commands: dict[str, tuple[np.ndarray, float]] = {}
@@ -244,7 +253,7 @@ class SimBridgeNode:
         }
         for a in self.cell.arm_ids:
             n.create_subscription(
-                ros.msg.Float64MultiArray, command_topic(a), self._command_callback(a), 10
+                Float64MultiArray, command_topic(a), self._command_callback(a), 10
             )
         self.t_ns = 0  # simulated time since the episode start [ns]
         self.started = False
@@ -261,7 +270,7 @@ class SimBridgeNode:
             f"cell {self.cell.name} ({', '.join(self.cell.arm_ids)}), episode {source}, "
             f"{self.s.physics_rate:g} Hz physics, "
             f"{'simulated time on /clock' if self.s.sim_time else 'wall time'}, "
-            f"runtime {ros.RUNTIME}"
+            f"rmw {rclpy.get_rmw_implementation_identifier()}"
         )
 
     def _metadata(self, kinds: dict[str, str], source: dict[str, Any]) -> dict[str, Any]:
@@ -298,21 +307,20 @@ class SimBridgeNode:
         """Stamp of the current state: simulated time, or wall time without ``sim_time``."""
         if self.s.sim_time:
             return self.t_ns
-        return self.node.get_clock().now().nanoseconds
+        return self.get_clock().now().nanoseconds
 
-    def _joint_state(self, arm_id: str, q: np.ndarray, v: np.ndarray, t_ns: int) -> bytes:
-        """CDR bytes (published as such on either runtime: rclpy takes serialized messages)."""
+    def _joint_state(self, arm_id: str, q: np.ndarray, v: np.ndarray, t_ns: int) -> JointState:
         msg = JointState(
-            header=Header(stamp=stamp(t_ns)),
             name=list(self.cell.arm(arm_id).robot.joint_names),
             position=[float(x) for x in q],
             velocity=[float(x) for x in v],
         )
-        return serialize(msg)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(t_ns), 1_000_000_000)
+        return msg
 
     def _publish_episode(self) -> None:
         t_ns = self._stamp_ns()
-        self.scenario_pub.publish(serialize(String(data=json.dumps(self.metadata))))
+        self.scenario_pub.publish(String(data=json.dumps(self.metadata)))
         empty = np.zeros(0)
         for a, pub in self.goal_pubs.items():
             pub.publish(self._joint_state(a, self.scenario.goal[a], empty, t_ns))
@@ -320,7 +328,9 @@ class SimBridgeNode:
     def _publish_state(self, velocities: dict[str, np.ndarray]) -> None:
         t_ns = self._stamp_ns()
         if self.clock_pub is not None:
-            self.clock_pub.publish(serialize(Clock(clock=stamp(t_ns))))
+            clock = Clock()
+            clock.clock.sec, clock.clock.nanosec = divmod(int(t_ns), 1_000_000_000)
+            self.clock_pub.publish(clock)
             self.published["clock"] += 1
         for a, pub in self.state_pubs.items():
             pub.publish(self._joint_state(a, self.sim.q[a], velocities[a], t_ns))
@@ -349,7 +359,7 @@ class SimBridgeNode:
             or np.any(np.abs(data) > limits + 1e-9)
         ):
             self.dropped[arm_id] += 1
-            self.node.get_logger().warning(
+            self.get_logger().warning(
                 f"dropped command of {arm_id}: needs {robot.dof} finite values within the "
                 f"velocity limits {limits.tolist()} rad/s, got {data.tolist()} "
                 f"({self.dropped[arm_id]} dropped)",
@@ -382,14 +392,14 @@ class SimBridgeNode:
             self._held.add(arm_id)
             self.watchdog_trips[arm_id] += 1
             age = now - latest[1] if latest is not None else math.inf
-            self.node.get_logger().warning(
+            self.get_logger().warning(
                 f"watchdog: no command for {arm_id} in {age:.2f} s (> command_timeout "
                 f"{self.s.command_timeout:g} s): holding it still "
                 f"(trip {self.watchdog_trips[arm_id]})"
             )
         elif not expired and arm_id in self._held:
             self._held.discard(arm_id)
-            self.node.get_logger().info(f"watchdog: commands for {arm_id} resumed")
+            self.get_logger().info(f"watchdog: commands for {arm_id} resumed")
 
     def _step(self) -> None:
         if not self.started:
@@ -409,11 +419,11 @@ class SimBridgeNode:
         """Start the episode once every arm's command topic has a publisher (a planner is up)
         plus ``start_delay`` for discovery to settle, or after ``start_timeout``."""
         now = time.monotonic()
-        missing = [a for a in self.cell.arm_ids if self.node.count_publishers(command_topic(a)) < 1]
+        missing = [a for a in self.cell.arm_ids if self.count_publishers(command_topic(a)) < 1]
         if self.s.wait_for_planners and now - self.created < self.s.start_timeout:
             if missing:
                 self._ready_at = math.inf
-                self.node.get_logger().info(
+                self.get_logger().info(
                     f"waiting for planners of {missing}", throttle_duration_sec=5.0
                 )
                 return
@@ -421,9 +431,9 @@ class SimBridgeNode:
             if now - self._ready_at < self.s.start_delay:
                 return
         elif missing:
-            self.node.get_logger().warning(f"starting without planners for {missing}")
+            self.get_logger().warning(f"starting without planners for {missing}")
         self.started = True
-        self.node.get_logger().info("episode started")
+        self.get_logger().info("episode started")
 
     def _check_done(self, collided: bool) -> None:
         s, t = self.s, self.t_ns / 1e9
@@ -443,7 +453,7 @@ class SimBridgeNode:
             self._done_at = time.monotonic()
             dropped = sum(self.dropped.values())
             trips = {a: n for a, n in self.watchdog_trips.items() if n}
-            self.node.get_logger().info(
+            self.get_logger().info(
                 f"episode done: {self.outcome} after {t:.2f} s ({dropped} commands dropped, "
                 f"watchdog trips {trips})"
             )

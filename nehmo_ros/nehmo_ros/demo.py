@@ -1,14 +1,15 @@
 """The main job (``./run demo``): a dual-UR5 episode through the ROS 2 node suite.
 
 The ``sim_bridge``, one ``arm_planner`` per arm and the ``recorder`` run as separate processes
-over the embedded ROS 2 runtime (Cyclone DDS on loopback, a DDS domain of their own), started,
+on rclpy (ROS 2 Jazzy, a DDS domain of their own, discovery kept on this machine), started,
 stopped and evaluated by ``nehmo_ros.orchestrate``. The scenario is one where the naive planner
-collides within a second, so the arms must coordinate. The metrics come from the MCAP log alone
+collides within a second, so the arms must coordinate. The metrics come from the rosbag2 bag alone
 (``nehmo_core.eval``); a GIF and a distance plot of the episode are rendered from it too.
 
 The planners use the shipped UR5-UR5 value function (``--model shipped``); ``--model
 synthetic`` gives stand-ins for plumbing checks, ``--model PATH`` a training run directory.
-Needs the ``nehmo_ros`` and ``sim_bridge`` packages installed (``./run`` installs them).
+Needs the ``nehmo_ros`` and ``sim_bridge`` packages and ROS 2 Jazzy's rclpy installed
+(``./run`` installs them).
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ import argparse
 import time
 from pathlib import Path
 
-from nehmo_core.errors import InvalidValueError, NehmoError
+from nehmo_core.errors import InvalidValueError
+from nehmo_ros.orchestrate import SuiteSettings, format_metrics, run_suite
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -31,12 +33,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        from nehmo_ros.orchestrate import SuiteSettings, format_metrics, run_suite
-    except ImportError as exc:
-        raise NehmoError(
-            f"the demo needs the nehmo_ros and sim_bridge packages ({exc}); run it through ./run"
-        ) from None
     from nehmo_core.eval.render import render_episode
     from nehmo_core.robots import load_cell
     from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
@@ -54,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"dual_ur5, scenario {args.index} of seed {args.seed}: sim_bridge + "
         f"{len(cell.arms)} x arm_planner ({args.planner}, model {args.model}) + recorder "
-        "as separate processes over the embedded ROS 2 runtime (loopback)",
+        "as separate rclpy processes (ROS 2 Jazzy, this machine only)",
         flush=True,
     )
     t0 = time.perf_counter()
@@ -63,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"  {format_metrics(summary['metrics'])}")
     if episode["outcome"]:
         print(f"  outcome {episode['outcome']} at {episode['end_time']:.2f} s simulated")
-    print(f"  MCAP log: {episode['log']}")
+    print(f"  middleware: {summary.get('rmw') or 'unknown'} (rclpy)")
+    print(f"  bag:      {episode['log']}")
     print(f"  summary:  {out / 'summary.json'}")
     print(f"  process outputs: {out / 'logs'}")
     if episode["outcome"] and not args.no_render:
@@ -74,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="nehmo demo", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m nehmo_ros.demo", description=__doc__)
     add_arguments(parser)
     return run(parser.parse_args(argv))
 
