@@ -87,9 +87,9 @@ def test_stops_at_success_within_tolerance() -> None:
 
 def test_stops_at_the_first_colliding_tick(tmp_path: Path) -> None:
     sc = _scenario_where_naive("collision")
-    result = run_episode(DUAL, sc, _naive(), log_path=tmp_path / "c.mcap")
+    result = run_episode(DUAL, sc, _naive(), log_path=tmp_path / "c")
     assert result.outcome == "collision" and result.collisions
-    log = read_episode_log(tmp_path / "c.mcap")
+    log = read_episode_log(tmp_path / "c")
     assert log.stamps[-1] == result.end_ns and len(log.collisions) == 1
     with CellWorld(DUAL) as world:  # the tick before was free: the runner did not stop late
         world.set_configuration({a: log.positions[a][-2] for a in DUAL.arm_ids})
@@ -162,9 +162,9 @@ def test_command_of_tick_k_was_planned_from_tick_k_minus_1(tmp_path: Path) -> No
     sc = _scenario_where_naive("success")
     planners = {a: _Recording(a) for a in DUAL.arm_ids}
     result = run_episode(
-        DUAL, sc, planners, EpisodeSettings(time_limit=0.4), log_path=tmp_path / "l.mcap"
+        DUAL, sc, planners, EpisodeSettings(time_limit=0.4), log_path=tmp_path / "l"
     )
-    log = read_episode_log(tmp_path / "l.mcap")
+    log = read_episode_log(tmp_path / "l")
     q = log.positions["ur5_0"]
     # the planner saw the state of its tick
     np.testing.assert_array_equal(np.array(planners["ur5_0"].seen), q[:-1])
@@ -196,7 +196,7 @@ def test_metrics_from_logs_equal_the_runner_results(tmp_path: Path) -> None:
     runs = [(scenarios[0], _naive(), naive_kinds), (scenarios[1], _naive(), naive_kinds)]
     runs.append((scenarios[0], _small_nehmo_planners(), kinds))
     for i, (sc, planners, k) in enumerate(runs):
-        path = tmp_path / f"episode_{i}.mcap"
+        path = tmp_path / f"episode_{i}"
         memory.append(run_episode(DUAL, sc, planners, settings, kinds=k, log_path=path))
         logged.append(evaluate_log(path))
     assert {r.outcome for r in memory} >= {"collision", "success"}
@@ -306,8 +306,8 @@ def test_renders_from_a_log(tmp_path: Path) -> None:
     from nehmo_core.eval.render import plot_distances, render_gif
 
     sc = _scenario_where_naive("collision")
-    run_episode(DUAL, sc, _naive(), EpisodeSettings(time_limit=1.0), log_path=tmp_path / "e.mcap")
-    log = read_episode_log(tmp_path / "e.mcap")
+    run_episode(DUAL, sc, _naive(), EpisodeSettings(time_limit=1.0), log_path=tmp_path / "e")
+    log = read_episode_log(tmp_path / "e")
     gif = render_gif(log, tmp_path / "e.gif", fps=5, size=(96, 72))
     with Image.open(gif) as im:
         assert im.n_frames >= 2 and im.size == (96, 72)
@@ -329,8 +329,13 @@ def test_evaluate_command_writes_logs_summary_and_table(tmp_path: Path) -> None:
     row = summary["rows"][0]
     assert row["log_check"] == "ok" and row["ours"]["episodes"] == 2
     assert row["paper"]["sr"] == 66
-    logs = sorted((tmp_path / "logs" / "naive").glob("*.mcap"))
-    assert [p.name for p in logs] == ["episode_0000.mcap", "episode_0001.mcap"]
+    logs = sorted((tmp_path / "logs" / "naive").iterdir())  # one bag directory per episode
+    assert [p.name for p in logs] == ["episode_0000", "episode_0001"]
+    assert [e["log"] for e in row["episodes"]] == [str(p) for p in logs]
+    assert sorted(p.name for p in logs[0].iterdir()) == ["episode_0000_0.mcap", "metadata.yaml"]
+    assert cli.run(args) == 0  # a second run replaces the bags of the first
+    again = json.loads((tmp_path / "summary.json").read_text())["rows"][0]
+    assert again["log_check"] == "ok" and again["episodes"] == row["episodes"]
     assert "| naive | 2 |" in (tmp_path / "summary.md").read_text()
     assert load_scenario_set(tmp_path / "scenarios" / "dual_ur5_seed0.json").indices == (0, 1)
     out = tmp_path / "bad"

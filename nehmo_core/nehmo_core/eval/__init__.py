@@ -1,10 +1,11 @@
 """Evaluation (paper § IV, DESIGN.md § 6): scenario sets, the batch episode runner, metrics
-computed from MCAP logs, the ``nehmo evaluate`` command, tables beside the paper's, renders.
+computed from the logs (rosbag2 bags), the ``nehmo evaluate`` command, tables beside the
+paper's, renders.
 
 - :mod:`.setups`: the setups (cell, time limit, success rule, timed arms) and planner rows.
 - :mod:`.scenario_sets`: seeded scenario sets as JSON files; the UR5-Kinova challenging filter.
 - :mod:`.episode`: :func:`run_episode` — 25 Hz control, one-tick planning latency, exact
-  collision checks at sub-steps, an MCAP log per episode (:mod:`.episode_log`, :mod:`.telemetry`).
+  collision checks at sub-steps, a bag per episode (:mod:`.episode_log`, :mod:`.telemetry`).
 - :mod:`.metrics`: :func:`evaluate_log` (an episode's result from its log) and :func:`aggregate`.
 - :mod:`.planners`: value-model sources and the planners of a row; :mod:`.batch`: process pool.
 - :mod:`.report`, :mod:`.paper`: JSON and markdown summaries with the paper's numbers.

@@ -1,4 +1,4 @@
-"""Batches of episodes over a process pool: one episode per task, one MCAP log per episode.
+"""Batches of episodes over a process pool: one episode per task, one bag (log) per episode.
 
 Each worker process keeps its simulators, value models (compiled once, cached on disk) and
 decentralized planners between episodes; centralized planners plan each scenario anew. The
@@ -26,6 +26,7 @@ from nehmo_core.eval.planners import (
     unmodelled_peers,
 )
 from nehmo_core.eval.setups import OPT_KINDS, get_setup, is_centralized, parse_row, row_slug
+from nehmo_core.logs import remove_bag
 from nehmo_core.planning.interface import Planner
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
@@ -57,7 +58,7 @@ class _Job:
     index: int  # the scenario's number (its seed)
     set_seed: int
     scenario: Scenario
-    log_path: Path
+    log_path: Path  # the episode's bag directory
 
 
 @dataclass
@@ -67,7 +68,7 @@ class RowRun:
     row: str
     kinds: dict[str, str]
     results: list[EpisodeResult]  # from the logs, in scenario order
-    logs: list[Path]
+    logs: list[Path]  # bag directories, in scenario order
     metrics: RowMetrics
     mismatches: list[int]  # positions whose log result differs from the in-memory one
     wall_seconds: float
@@ -133,6 +134,7 @@ def _run_job(config: BatchConfig, job: _Job) -> tuple[int, EpisodeResult, float,
         "unmodelled_peers": unmodelled,
         "planner_settings": config.planner_settings.to_dict(),
     }
+    remove_bag(job.log_path)  # an earlier run's bag of this episode
     result = run_episode(
         cell,
         job.scenario,
@@ -162,7 +164,7 @@ def _executor(workers: int) -> Executor | None:
 def _jobs(config: BatchConfig, row: str, scenarios: ScenarioSet) -> list[_Job]:
     logs = config.out_dir / "logs" / row_slug(row)
     return [
-        _Job(row, k, index, scenarios.seed, sc, logs / f"episode_{index:04d}.mcap")
+        _Job(row, k, index, scenarios.seed, sc, logs / f"episode_{index:04d}")
         for k, (index, sc) in enumerate(zip(scenarios.indices, scenarios.scenarios, strict=True))
     ]
 

@@ -4,7 +4,7 @@
         --out out/eval_dual --workers 2 --value-model /work/data/runs/ur5_ur5_bc_sym
 
 writes ``DIR/scenarios/<setup>_seed<seed>.json`` (the scenario set ``--seed`` selects),
-``DIR/logs/<row>/episode_<i>.mcap`` (one MCAP log per episode), ``DIR/summary.json`` and
+``DIR/logs/<row>/episode_<i>/`` (one rosbag2 bag per episode), ``DIR/summary.json`` and
 ``DIR/summary.md`` (our numbers with the paper's beside them), and with ``--render`` a GIF and a
 distance plot of the first episode of every row under ``DIR/renders/``.
 """

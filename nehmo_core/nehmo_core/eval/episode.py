@@ -138,7 +138,7 @@ def run_episode(
     log_path: str | Path | None = None,
     metadata: Mapping[str, Any] | None = None,
 ) -> EpisodeResult:
-    """Run one episode and return its result; write its MCAP log to ``log_path`` if given.
+    """Run one episode and return its result; write its log to the bag ``log_path`` if given.
 
     ``planners`` holds one planner per arm id; ``kinds`` names them in the log and metrics
     (default: the class name). ``simulator`` may be reused across episodes of the same cell

@@ -1,4 +1,4 @@
-"""One episode as an MCAP log in the project's schema (:mod:`nehmo_core.logs.topics`).
+"""One episode as a rosbag2 bag in the project's schema (:mod:`nehmo_core.logs.topics`).
 
 Written per episode, in simulated time (``log_time`` = stamp [ns] from the episode start):
 
@@ -92,7 +92,8 @@ def cell_metadata(cell: Cell) -> dict[str, Any]:
 
 
 class EpisodeLogWriter:
-    """Writes the topics of one episode; a context manager (the summary is written on exit)."""
+    """Writes the topics of one episode to the new bag directory `path`; a context manager
+    (the bag is finished on exit)."""
 
     def __init__(self, path: str | Path, cell: Cell) -> None:
         self.cell = cell
@@ -109,8 +110,8 @@ class EpisodeLogWriter:
         return JointState(
             header=Header(stamp=stamp(t_ns), frame_id=""),
             name=list(self.cell.arm(arm_id).robot.joint_names),
-            position=[float(x) for x in q],
-            velocity=[float(x) for x in v],
+            position=np.asarray(q, dtype=np.float64),
+            velocity=np.asarray(v, dtype=np.float64),
         )
 
     def goals(self, goals: Mapping[str, np.ndarray]) -> None:
@@ -129,7 +130,7 @@ class EpisodeLogWriter:
 
     def plan(self, arm_id: str, t_ns: int, velocity: np.ndarray, status: DiagnosticStatus) -> None:
         """A command taking effect at ``t_ns`` and the planner status that produced it."""
-        cmd = Float64MultiArray(data=[float(x) for x in velocity])
+        cmd = Float64MultiArray(data=np.asarray(velocity, dtype=np.float64))
         self._log.write(command_topic(arm_id), cmd, t_ns)
         self._log.write(status_topic(arm_id), status, t_ns)
 
@@ -178,7 +179,8 @@ def _ordered(msg: JointState, cell: Cell, arm_id: str, where: str) -> np.ndarray
 
 
 def read_episode_log(path: str | Path) -> EpisodeLog:
-    """Read an episode log written by :class:`EpisodeLogWriter` (or a recorder, same topics)."""
+    """Read an episode log (bag directory, or a bare ``.mcap`` file) written by
+    :class:`EpisodeLogWriter` or a recorder (same topics)."""
     p = Path(path)
     metadata = read_scenario(p)
     if metadata is None or metadata.get("format") != EPISODE_FORMAT:

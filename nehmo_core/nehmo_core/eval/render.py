@@ -1,12 +1,12 @@
 """Renders of a logged episode: an animated GIF (PyBullet's CPU renderer) and a distance plot.
 
-Everything is drawn from the MCAP log alone: the cell and goals from its metadata and goal
+Everything is drawn from the log alone: the cell and goals from its metadata and goal
 topics, the arms' motion from the joint states. The GIF shows the arms in their own colours,
 their goal configurations as faint green ghosts, and the time and outcome in the caption; the plot
 shows the minimum exact distance [m] between every pair of arms over time (PyBullet on the
 collision geometry), with the outcome marked.
 
-    python -m nehmo_core.eval.render LOG.mcap OUT_DIR [--fps 10] [--size 480x360]
+    python -m nehmo_core.eval.render LOG_BAG OUT_DIR [--fps 10] [--size 480x360]
 """
 
 from __future__ import annotations
@@ -171,7 +171,7 @@ def render_episode(
 ) -> list[Path]:
     """The GIF and the distance plot of one logged episode, named after the log."""
     log = read_episode_log(log_path)
-    stem = Path(log_path).stem
+    stem = Path(log_path).name.removesuffix(".mcap")
     out = Path(out_dir)
     return [
         render_gif(log, out / f"{stem}.gif", fps, size),
@@ -181,7 +181,7 @@ def render_episode(
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m nehmo_core.eval.render", description=__doc__)
-    parser.add_argument("log", type=Path, help="an episode log (.mcap)")
+    parser.add_argument("log", type=Path, help="an episode log (bag directory)")
     parser.add_argument("out", type=Path, help="output directory")
     parser.add_argument("--fps", type=float, default=10.0)
     parser.add_argument("--size", default="480x360", help="WIDTHxHEIGHT [px]")

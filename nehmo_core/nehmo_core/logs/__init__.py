@@ -1,10 +1,11 @@
-"""The MCAP log schema of NeHMO: one writer and one reader for batch runs and the ROS recorder.
+"""The log schema of NeHMO: one writer and one reader for batch runs and the ROS recorder.
 
-Logs are rosbag2-compatible MCAP (profile ``ros2``, ``ros2msg`` schemas, ``cdr`` messages), so
-``ros2 bag``, Foxglove and the ``mcap`` and ``rosbags`` readers open them. Topics are
-listed in :mod:`nehmo_core.logs.topics`; message classes and their CDR codec live in
-:mod:`nehmo_core.logs.messages`. A log whose writer was killed is repaired with
-``python -m nehmo_core.logs.recover broken.mcap fixed.mcap`` (in code:
+A log is a rosbag2 bag directory ``NAME/`` holding ``NAME/NAME_0.mcap`` (profile ``ros2``,
+``ros2msg`` schemas, ``cdr`` messages) and ``NAME/metadata.yaml``, so ``ros2 bag``, Foxglove,
+``rosbags`` (``AnyReader``) and ``mcap`` open it. Topics are listed in
+:mod:`nehmo_core.logs.topics`; messages are the ``rosbags`` ROS 2 Jazzy typestore's, reached
+through :mod:`nehmo_core.logs.messages`. A bag whose writer was killed is repaired with
+``python -m nehmo_core.logs.recover broken_bag fixed_bag`` (in code:
 :func:`nehmo_core.logs.recover.recover`).
 """
 
@@ -17,19 +18,24 @@ from nehmo_core.logs.messages import (
     Header,
     JointState,
     KeyValue,
+    MessageError,
     MultiArrayDimension,
     MultiArrayLayout,
     RosMessage,
     String,
     Time,
     deserialize,
+    leading_stamp_ns,
     message_definition,
+    msgtype_of,
     serialize,
+    type_hash,
 )
 from nehmo_core.logs.reader import (
     LogFileError,
     LogRecord,
     LogSummary,
+    bag_files,
     iter_log,
     read_log,
     read_scenario,
@@ -47,7 +53,14 @@ from nehmo_core.logs.topics import (
     status_topic,
     topic_type,
 )
-from nehmo_core.logs.writer import LogWriter, LogWriterError, QosDescription, WriterSettings
+from nehmo_core.logs.writer import (
+    LogWriter,
+    LogWriterError,
+    QosDescription,
+    WriterSettings,
+    mcap_file_name,
+    remove_bag,
+)
 
 __all__ = [
     "CLOCK_TOPIC",
@@ -66,6 +79,7 @@ __all__ = [
     "LogSummary",
     "LogWriter",
     "LogWriterError",
+    "MessageError",
     "MultiArrayDimension",
     "MultiArrayLayout",
     "QosDescription",
@@ -74,17 +88,23 @@ __all__ = [
     "Time",
     "WriterSettings",
     "arm_topics",
+    "bag_files",
     "command_topic",
     "deserialize",
     "goal_topic",
     "iter_log",
     "joint_states_topic",
+    "leading_stamp_ns",
+    "mcap_file_name",
     "message_definition",
+    "msgtype_of",
     "read_log",
     "read_scenario",
+    "remove_bag",
     "run_topics",
     "serialize",
     "status_topic",
     "summarize",
     "topic_type",
+    "type_hash",
 ]

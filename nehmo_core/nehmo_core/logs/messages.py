@@ -1,220 +1,304 @@
-"""The ROS 2 message types of the NeHMO suite, as plain dataclasses with a CDR codec.
+"""The ROS 2 messages of the NeHMO suite, served by the ``rosbags`` ROS 2 Jazzy typestore.
 
-Field names and Python value types mirror rclpy's generated classes (``byte`` fields hold a
-1-byte ``bytes``; sequences are lists here where rclpy uses ``array.array``), so node code works
-with either. Each class records its ROS type name and its fields once; the CDR encoder, the
-decoder and the ``.msg`` text stored in MCAP schemas are all derived from that one description.
+The names below (``JointState``, ``DiagnosticStatus``, ...) build the typestore's own dataclass
+instances from keyword arguments; a field left out gets its zero value (0, "", an empty
+sequence, a zero nested message), and lists given for numeric sequences become the numpy
+arrays the typestore needs::
 
-Checked byte-for-byte against ``rosbags``' ROS 2 Jazzy serializer in ``tests/test_ros_msgs.py``.
+    msg = JointState(header=Header(stamp=Time(sec=1)), name=["j1"], position=[0.5])
+    data = serialize(msg)                  # CDR, 4-byte encapsulation header first
+    deserialize(data, msgtype_of(msg))     # back to a typestore instance
+
+``isinstance(x, JointState)`` holds for any typestore instance of that ROS type, and constants
+stay on the names (``DiagnosticStatus.WARN == 1``; ``byte`` fields are ints here, as in
+``rosbags``). Definitions (``message_definition``) and hashes come from the same typestore, so
+the CDR, the ``ros2msg`` schema text and the RIHS01 hash all match ROS 2 Jazzy.
 """
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Iterable
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
+import struct
+from collections.abc import Callable, Iterable, Mapping
+from functools import cache
+from typing import TYPE_CHECKING, Any, ClassVar
 
-from nehmo_core.errors import UnknownNameError
-from nehmo_core.logs.cdr import PRIMITIVE_TYPES, CdrReader, CdrWriter
+import numpy as np
 
-#: Line that separates dependencies in a rosbag2 ``ros2msg`` schema (80 ``=``).
-MSGDEF_SEPARATOR = "=" * 80
+from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
+
+__all__ = [
+    "MESSAGE_TYPES",
+    "Clock",
+    "DiagnosticArray",
+    "DiagnosticStatus",
+    "Float64MultiArray",
+    "Header",
+    "JointState",
+    "KeyValue",
+    "MessageError",
+    "MultiArrayDimension",
+    "MultiArrayLayout",
+    "RosMessage",
+    "String",
+    "Time",
+    "build",
+    "deserialize",
+    "leading_stamp_ns",
+    "message_definition",
+    "msgtype_of",
+    "serialize",
+    "type_hash",
+    "typestore",
+]
+
+# CDR encapsulation identifiers (first two bytes of a serialized message).
+_CDR_LE = b"\x00\x01"
+_CDR_BE = b"\x00\x00"
+_STAMP = {_CDR_LE: struct.Struct("<iI"), _CDR_BE: struct.Struct(">iI")}
 
 
-@dataclass(frozen=True)
-class FieldSpec:
-    """One field of a message: `kind` is a primitive, "string" or a type "pkg/msg/Name"."""
-
-    name: str
-    kind: str
-    sequence: bool = False
+class MessageError(NehmoError, ValueError):
+    """Bytes that are not a CDR message of the given type, or a message that cannot be encoded."""
 
 
-@dataclass(frozen=True)
-class ConstantSpec:
-    """A constant of a message definition (e.g. ``byte OK=0``)."""
+@cache
+def typestore() -> Typestore:
+    """The ``rosbags`` ROS 2 Jazzy typestore (types, CDR codec, definitions, hashes)."""
+    from rosbags.typesys import Stores, get_typestore
 
-    name: str
-    kind: str
-    value: int
-
-
-class RosMessage:
-    """Base of the message dataclasses: the ROS type name and the ordered field list."""
-
-    _TYPE: ClassVar[str] = ""
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = ()
-    _CONSTANTS: ClassVar[tuple[ConstantSpec, ...]] = ()
-
-    @classmethod
-    def get_fields_and_field_types(cls) -> dict[str, str]:
-        """Field name → ROS type, like rclpy's classmethod of the same name."""
-        return {f.name: _field_type_text(f) for f in cls._FIELDS}
+    return get_typestore(Stores.ROS2_JAZZY)
 
 
-@dataclass
+def _store_class(msgtype: str) -> type:
+    try:
+        return typestore().types[msgtype]
+    except KeyError:
+        raise UnknownNameError("message type", msgtype, typestore().types) from None
+
+
+# ------------------------------------------------------------------ field defaults and coercion
+
+_FieldDef = tuple[Any, Any]  # rosbags (Nodetype, details)
+
+
+@cache
+def _numpy_dtype(base: str) -> np.dtype[Any]:
+    from rosbags.serde.utils import ndtype
+
+    return np.dtype(ndtype(base))
+
+
+def _base_default(base: str) -> object:
+    if base == "string" or base == "wstring":
+        return ""
+    if base == "bool":
+        return False
+    if base.startswith("float"):
+        return 0.0
+    return 0
+
+
+def _default(fdef: _FieldDef) -> object:
+    from rosbags.typesys.base import Nodetype
+
+    kind, detail = fdef
+    if kind == Nodetype.BASE:
+        return _base_default(detail[0])
+    if kind == Nodetype.NAME:
+        return build(detail)
+    sub, length = detail
+    if sub[0] == Nodetype.BASE and sub[1][0] not in ("string", "wstring"):
+        return np.zeros(length if kind == Nodetype.ARRAY else 0, dtype=_numpy_dtype(sub[1][0]))
+    return [_default(sub) for _ in range(length)] if kind == Nodetype.ARRAY else []
+
+
+def _coerce(fdef: _FieldDef, value: object, where: str, rebuild: bool = False) -> object:
+    """`value` in the form the typestore's serializer needs (numpy arrays, nested instances).
+
+    A nested typestore instance is kept as it is unless `rebuild`.
+    """
+    from rosbags.typesys.base import Nodetype
+
+    kind, detail = fdef
+    if kind == Nodetype.BASE:
+        if detail[0] in ("byte", "char") and isinstance(value, bytes | bytearray):
+            if len(value) != 1:
+                raise InvalidValueError(where, "is a byte field and needs exactly 1 byte", value)
+            return value[0]
+        return value
+    if kind == Nodetype.NAME:
+        if not rebuild and type(value) is _store_class(detail):
+            return value
+        return _as_store_message(value, detail, where, rebuild)
+    sub, length = detail
+    array: Any
+    if sub[0] == Nodetype.BASE and sub[1][0] not in ("string", "wstring"):
+        dtype = _numpy_dtype(sub[1][0])
+        if (
+            isinstance(value, np.ndarray)
+            and value.dtype == dtype
+            and value.ndim == 1
+            and value.flags.c_contiguous
+        ):
+            array = value
+        elif isinstance(value, bytes | bytearray) and dtype == np.uint8:
+            array = np.frombuffer(bytes(value), dtype=np.uint8).copy()
+        elif isinstance(value, str | bytes | bytearray):
+            raise InvalidValueError(where, f"must be a sequence of {sub[1][0]}", value)
+        else:
+            try:
+                array = np.ascontiguousarray(value, dtype=dtype).reshape(-1)
+            except (TypeError, ValueError) as err:
+                raise InvalidValueError(where, f"must be a sequence of {sub[1][0]}", value) from err
+    else:
+        if isinstance(value, str | bytes) or not isinstance(value, Iterable):
+            raise InvalidValueError(where, "must be a sequence, not a single value", value)
+        array = [_coerce(sub, item, where, rebuild) for item in value]
+    if kind == Nodetype.ARRAY and len(array) != length:
+        raise InvalidValueError(where, f"must hold exactly {length} items", len(array))
+    return array
+
+
+def _as_store_message(value: object, msgtype: str, where: str, rebuild: bool = False) -> object:
+    """`value` as an instance of the typestore class of `msgtype` with well-formed fields."""
+    cls = _store_class(msgtype)
+    if isinstance(value, Mapping):
+        return build(msgtype, **value)
+    if msgtype_of(value) != msgtype and not isinstance(value, cls):
+        raise InvalidValueError(where, f"must be a {msgtype}", value)
+    fields = typestore().fielddefs[msgtype][1]
+    return cls(
+        *(_coerce(f, getattr(value, name), f"{where}.{name}", rebuild) for name, f in fields)
+    )
+
+
+def build(msgtype: str, **values: object) -> Any:
+    """A typestore instance of `msgtype`; fields not given get their zero value."""
+    cls = _store_class(msgtype)
+    fields = typestore().fielddefs[msgtype][1]
+    names = [name for name, _ in fields]
+    unknown = sorted(set(values) - set(names))
+    if unknown:
+        raise InvalidValueError(f"{msgtype} field", f"must be one of {names}", unknown[0])
+    args = [
+        _coerce(fdef, values[name], f"{msgtype}.{name}") if name in values else _default(fdef)
+        for name, fdef in fields
+    ]
+    return cls(*args)
+
+
+# ------------------------------------------------------------------ the public message names
+
+
+class _MessageMeta(type):
+    """Calling a message name builds the typestore instance; isinstance compares ROS types."""
+
+    __msgtype__: str
+
+    def __call__(cls, **values: object) -> Any:
+        return build(cls.__msgtype__, **values)
+
+    def __instancecheck__(cls, obj: object) -> bool:
+        if cls.__msgtype__ == "":  # RosMessage: any message of the suite
+            return msgtype_of(obj) in MESSAGE_TYPES
+        return msgtype_of(obj) == cls.__msgtype__
+
+    def __getattr__(cls, name: str) -> Any:  # constants, e.g. DiagnosticStatus.WARN
+        if name.startswith("__") or cls.__msgtype__ == "":
+            raise AttributeError(name)
+        return getattr(_store_class(cls.__msgtype__), name)
+
+
+class RosMessage(metaclass=_MessageMeta):
+    """Base of the message names; ``isinstance(x, RosMessage)`` for any type of the suite."""
+
+    __msgtype__: ClassVar[str] = ""
+
+    if TYPE_CHECKING:  # the instances are typestore dataclasses; their fields are dynamic
+
+        def __init__(self, **values: object) -> None: ...
+
+        def __getattr__(self, name: str) -> Any: ...
+
+        def __setattr__(self, name: str, value: Any) -> None: ...
+
+
 class Time(RosMessage):
-    """builtin_interfaces/msg/Time: seconds [s] and nanoseconds [ns] since an epoch."""
+    """builtin_interfaces/msg/Time: ``sec`` [s] and ``nanosec`` [ns] since an epoch."""
 
-    _TYPE: ClassVar[str] = "builtin_interfaces/msg/Time"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("sec", "int32"),
-        FieldSpec("nanosec", "uint32"),
-    )
-    sec: int = 0
-    nanosec: int = 0
+    __msgtype__ = "builtin_interfaces/msg/Time"
 
 
-@dataclass
 class Header(RosMessage):
-    """std_msgs/msg/Header: a time stamp and a coordinate frame name."""
+    """std_msgs/msg/Header: ``stamp`` (Time) and ``frame_id``."""
 
-    _TYPE: ClassVar[str] = "std_msgs/msg/Header"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("stamp", Time._TYPE),
-        FieldSpec("frame_id", "string"),
-    )
-    stamp: Time = field(default_factory=Time)
-    frame_id: str = ""
+    __msgtype__ = "std_msgs/msg/Header"
 
 
-@dataclass
 class JointState(RosMessage):
-    """sensor_msgs/msg/JointState: positions [rad], velocities [rad/s], efforts [N·m]."""
+    """sensor_msgs/msg/JointState: ``position`` [rad], ``velocity`` [rad/s], ``effort`` [N·m]."""
 
-    _TYPE: ClassVar[str] = "sensor_msgs/msg/JointState"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("header", Header._TYPE),
-        FieldSpec("name", "string", sequence=True),
-        FieldSpec("position", "float64", sequence=True),
-        FieldSpec("velocity", "float64", sequence=True),
-        FieldSpec("effort", "float64", sequence=True),
-    )
-    header: Header = field(default_factory=Header)
-    name: list[str] = field(default_factory=list)
-    position: list[float] = field(default_factory=list)
-    velocity: list[float] = field(default_factory=list)
-    effort: list[float] = field(default_factory=list)
+    __msgtype__ = "sensor_msgs/msg/JointState"
 
 
-@dataclass
 class MultiArrayDimension(RosMessage):
-    """std_msgs/msg/MultiArrayDimension."""
+    """std_msgs/msg/MultiArrayDimension: ``label``, ``size``, ``stride``."""
 
-    _TYPE: ClassVar[str] = "std_msgs/msg/MultiArrayDimension"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("label", "string"),
-        FieldSpec("size", "uint32"),
-        FieldSpec("stride", "uint32"),
-    )
-    label: str = ""
-    size: int = 0
-    stride: int = 0
+    __msgtype__ = "std_msgs/msg/MultiArrayDimension"
 
 
-@dataclass
 class MultiArrayLayout(RosMessage):
-    """std_msgs/msg/MultiArrayLayout."""
+    """std_msgs/msg/MultiArrayLayout: ``dim`` and ``data_offset``."""
 
-    _TYPE: ClassVar[str] = "std_msgs/msg/MultiArrayLayout"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("dim", MultiArrayDimension._TYPE, sequence=True),
-        FieldSpec("data_offset", "uint32"),
-    )
-    dim: list[MultiArrayDimension] = field(default_factory=list)
-    data_offset: int = 0
+    __msgtype__ = "std_msgs/msg/MultiArrayLayout"
 
 
-@dataclass
 class Float64MultiArray(RosMessage):
-    """std_msgs/msg/Float64MultiArray: ros2_control's forward-command message."""
+    """std_msgs/msg/Float64MultiArray: ros2_control's forward-command message (``data``)."""
 
-    _TYPE: ClassVar[str] = "std_msgs/msg/Float64MultiArray"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("layout", MultiArrayLayout._TYPE),
-        FieldSpec("data", "float64", sequence=True),
-    )
-    layout: MultiArrayLayout = field(default_factory=MultiArrayLayout)
-    data: list[float] = field(default_factory=list)
+    __msgtype__ = "std_msgs/msg/Float64MultiArray"
 
 
-@dataclass
 class String(RosMessage):
-    """std_msgs/msg/String."""
+    """std_msgs/msg/String: ``data``."""
 
-    _TYPE: ClassVar[str] = "std_msgs/msg/String"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (FieldSpec("data", "string"),)
-    data: str = ""
+    __msgtype__ = "std_msgs/msg/String"
 
 
-@dataclass
 class Clock(RosMessage):
-    """rosgraph_msgs/msg/Clock: the simulated time published on ``/clock``."""
+    """rosgraph_msgs/msg/Clock: the simulated time published on ``/clock`` (``clock``)."""
 
-    _TYPE: ClassVar[str] = "rosgraph_msgs/msg/Clock"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (FieldSpec("clock", Time._TYPE),)
-    clock: Time = field(default_factory=Time)
+    __msgtype__ = "rosgraph_msgs/msg/Clock"
 
 
-@dataclass
 class KeyValue(RosMessage):
-    """diagnostic_msgs/msg/KeyValue."""
+    """diagnostic_msgs/msg/KeyValue: ``key`` and ``value``."""
 
-    _TYPE: ClassVar[str] = "diagnostic_msgs/msg/KeyValue"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("key", "string"),
-        FieldSpec("value", "string"),
-    )
-    key: str = ""
-    value: str = ""
+    __msgtype__ = "diagnostic_msgs/msg/KeyValue"
 
 
-@dataclass
 class DiagnosticStatus(RosMessage):
-    """diagnostic_msgs/msg/DiagnosticStatus; `level` is a 1-byte ``bytes`` as in rclpy."""
+    """diagnostic_msgs/msg/DiagnosticStatus; ``level`` is OK 0, WARN 1, ERROR 2 or STALE 3."""
 
-    _TYPE: ClassVar[str] = "diagnostic_msgs/msg/DiagnosticStatus"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("level", "byte"),
-        FieldSpec("name", "string"),
-        FieldSpec("message", "string"),
-        FieldSpec("hardware_id", "string"),
-        FieldSpec("values", KeyValue._TYPE, sequence=True),
-    )
-    _CONSTANTS: ClassVar[tuple[ConstantSpec, ...]] = (
-        ConstantSpec("OK", "byte", 0),
-        ConstantSpec("WARN", "byte", 1),
-        ConstantSpec("ERROR", "byte", 2),
-        ConstantSpec("STALE", "byte", 3),
-    )
-    OK: ClassVar[bytes] = b"\x00"
-    WARN: ClassVar[bytes] = b"\x01"
-    ERROR: ClassVar[bytes] = b"\x02"
-    STALE: ClassVar[bytes] = b"\x03"
-    level: bytes = b"\x00"
-    name: str = ""
-    message: str = ""
-    hardware_id: str = ""
-    values: list[KeyValue] = field(default_factory=list)
+    __msgtype__ = "diagnostic_msgs/msg/DiagnosticStatus"
+    OK: ClassVar[int]
+    WARN: ClassVar[int]
+    ERROR: ClassVar[int]
+    STALE: ClassVar[int]
 
 
-@dataclass
 class DiagnosticArray(RosMessage):
-    """diagnostic_msgs/msg/DiagnosticArray."""
+    """diagnostic_msgs/msg/DiagnosticArray: ``header`` and ``status`` (DiagnosticStatus list)."""
 
-    _TYPE: ClassVar[str] = "diagnostic_msgs/msg/DiagnosticArray"
-    _FIELDS: ClassVar[tuple[FieldSpec, ...]] = (
-        FieldSpec("header", Header._TYPE),
-        FieldSpec("status", DiagnosticStatus._TYPE, sequence=True),
-    )
-    header: Header = field(default_factory=Header)
-    status: list[DiagnosticStatus] = field(default_factory=list)
+    __msgtype__ = "diagnostic_msgs/msg/DiagnosticArray"
 
 
-#: Every message class of the suite by ROS type name ("sensor_msgs/msg/JointState").
+#: The message names of the suite by ROS type name ("sensor_msgs/msg/JointState").
 MESSAGE_TYPES: dict[str, type[RosMessage]] = {
-    cls._TYPE: cls
+    cls.__msgtype__: cls
     for cls in (
         Time,
         Header,
@@ -231,152 +315,82 @@ MESSAGE_TYPES: dict[str, type[RosMessage]] = {
 }
 
 
-def message_class(msgtype: str) -> type[RosMessage]:
-    """The class of ROS type `msgtype`; raises listing the known types otherwise."""
-    try:
-        return MESSAGE_TYPES[msgtype]
-    except KeyError:
-        raise UnknownNameError("message type", msgtype, MESSAGE_TYPES) from None
+# ------------------------------------------------------------------ codec, definitions, hashes
 
 
 def msgtype_of(msg: object) -> str:
-    """ROS type name of a message instance or class, ours or rclpy's generated one."""
+    """ROS type name of a message instance or class: a typestore one, ours or rclpy's."""
     cls = msg if isinstance(msg, type) else type(msg)
-    own = getattr(cls, "_TYPE", "")
-    if own:
-        return str(own)
+    own = getattr(cls, "__msgtype__", "")
+    if isinstance(own, str) and own:
+        return own
     package = cls.__module__.split(".")[0]  # rclpy: "sensor_msgs.msg._joint_state"
     return f"{package}/msg/{cls.__name__}"
 
 
-# ---------------------------------------------------------------------------------------- CDR
-
-
-def _byte_value(value: object) -> int:
-    if isinstance(value, bytes | bytearray):
-        if len(value) != 1:
-            raise ValueError(f"a byte field needs exactly 1 byte; got {bytes(value)!r}")
-        return value[0]
-    return int(value)  # type: ignore[call-overload]
-
-
-def _encode_fields(writer: CdrWriter, msg: object, cls: type[RosMessage]) -> None:
-    for spec in cls._FIELDS:
-        value = getattr(msg, spec.name)
-        kind = spec.kind
-        if kind == "string":
-            if spec.sequence:
-                writer.strings(value)
-            else:
-                writer.string(value)
-        elif kind in PRIMITIVE_TYPES:
-            if kind == "byte":
-                value = [_byte_value(v) for v in value] if spec.sequence else _byte_value(value)
-            if spec.sequence:
-                writer.primitives(kind, value)
-            else:
-                writer.primitive(kind, value)
-        else:
-            sub = MESSAGE_TYPES[kind]
-            if spec.sequence:
-                items = list(value)
-                writer.count(len(items))
-                for item in items:
-                    _encode_fields(writer, item, sub)
-            else:
-                _encode_fields(writer, value, sub)
-
-
-def _decode_fields(reader: CdrReader, cls: type[RosMessage]) -> RosMessage:
-    values: dict[str, Any] = {}
-    for spec in cls._FIELDS:
-        kind = spec.kind
-        if kind == "string":
-            values[spec.name] = reader.strings() if spec.sequence else reader.string()
-        elif kind in PRIMITIVE_TYPES:
-            if spec.sequence:
-                items = reader.primitives(kind)
-                values[spec.name] = [bytes([v]) for v in items] if kind == "byte" else items  # type: ignore[list-item]
-            else:
-                item = reader.primitive(kind)
-                values[spec.name] = bytes([item]) if kind == "byte" else item  # type: ignore[list-item]
-        else:
-            sub = MESSAGE_TYPES[kind]
-            if spec.sequence:
-                values[spec.name] = [_decode_fields(reader, sub) for _ in range(reader.count())]
-            else:
-                values[spec.name] = _decode_fields(reader, sub)
-    return cls(**values)
-
-
 def serialize(msg: object, msgtype: str | None = None) -> bytes:
-    """CDR bytes (with the encapsulation header) of `msg`.
+    """Little-endian CDR bytes (4-byte encapsulation header first) of `msg`.
 
-    `msg` may be one of our dataclasses or any object with the same attributes (an rclpy
-    message, for instance); `msgtype` defaults to the type name of `msg`.
+    `msg` is a typestore instance (what the message names build) or any object with the same
+    fields, e.g. one whose sequences were set to lists later; `msgtype` defaults to its type.
     """
-    cls = message_class(msgtype or msgtype_of(msg))
-    writer = CdrWriter()
-    _encode_fields(writer, msg, cls)
-    return writer.getvalue()
+    msgtype = msgtype or msgtype_of(msg)
+    store = typestore()
+    _store_class(msgtype)
+    try:
+        return bytes(store.serialize_cdr(msg, msgtype))
+    except (AttributeError, TypeError, ValueError, struct.error):
+        pass  # lists where arrays belong, an rclpy message, ...: normalize and retry
+    value = _as_store_message(msg, msgtype, msgtype, rebuild=True)
+    try:
+        return bytes(store.serialize_cdr(value, msgtype))
+    except (AttributeError, TypeError, ValueError, struct.error, OverflowError) as err:
+        raise MessageError(f"cannot encode a {msgtype}: {type(err).__name__}: {err}") from None
 
 
-def deserialize(data: bytes | bytearray | memoryview, msgtype: str) -> RosMessage:
-    """Decode CDR bytes of ROS type `msgtype` into our dataclass."""
-    cls = message_class(msgtype)
-    return _decode_fields(CdrReader(data), cls)
+def deserialize(data: bytes | bytearray | memoryview, msgtype: str) -> Any:
+    """Decode CDR bytes of ROS type `msgtype` into the typestore's dataclass."""
+    from rosbags.serde import SerdeError
 
-
-def to_dict(msg: RosMessage) -> dict[str, Any]:
-    """The message as nested plain dicts and lists (for JSON or comparisons)."""
-    return dataclasses.asdict(msg)  # type: ignore[call-overload]
-
-
-# ------------------------------------------------------------------------------- .msg texts
-
-
-def _field_type_text(spec: FieldSpec) -> str:
-    if "/msg/" in spec.kind:
-        package, _, name = spec.kind.partition("/msg/")
-        text = f"{package}/{name}"
-    else:
-        text = spec.kind
-    return text + ("[]" if spec.sequence else "")
-
-
-def own_definition(msgtype: str) -> str:
-    """The ``.msg`` text of one type (fields and constants, no dependencies)."""
-    cls = message_class(msgtype)
-    lines = [f"{c.kind} {c.name}={c.value}" for c in cls._CONSTANTS]
-    lines += [f"{_field_type_text(f)} {f.name}" for f in cls._FIELDS]
-    return "\n".join(lines) + "\n"
-
-
-def dependencies(msgtype: str) -> list[str]:
-    """Every message type `msgtype` uses, recursively, in first-use order."""
-    found: list[str] = []
-
-    def visit(name: str) -> None:
-        for spec in message_class(name)._FIELDS:
-            if spec.kind in MESSAGE_TYPES and spec.kind not in found:
-                found.append(spec.kind)
-                visit(spec.kind)
-
-    visit(msgtype)
-    return found
+    _store_class(msgtype)
+    try:
+        return typestore().deserialize_cdr(bytes(data), msgtype)
+    except (SerdeError, struct.error, IndexError, ValueError, UnicodeDecodeError) as err:
+        raise MessageError(
+            f"{len(data)} bytes are not a CDR {msgtype} ({type(err).__name__}: {err})"
+        ) from None
 
 
 def message_definition(msgtype: str) -> str:
     """The rosbag2 ``ros2msg`` schema text: the type's .msg, then each dependency's.
 
-    Each dependency is preceded by a line of 80 ``=`` and a line ``MSG: pkg/msg/Type``.
+    Each dependency follows a line of 80 ``=`` and a line ``MSG: pkg/Type``, as rosbag2 writes.
     """
-    parts = [own_definition(msgtype)]
-    for dep in dependencies(msgtype):
-        parts.append(f"{MSGDEF_SEPARATOR}\nMSG: {dep}\n{own_definition(dep)}")
-    return "".join(parts)
+    _store_class(msgtype)
+    return typestore().generate_msgdef(msgtype, ros_version=2)[0]
 
 
-def all_message_types() -> Iterable[str]:
-    """The ROS type names this module can encode and decode."""
-    return tuple(MESSAGE_TYPES)
+def type_hash(msgtype: str) -> str:
+    """The ROS 2 type description hash (``RIHS01_<sha256 hex>``) of `msgtype`."""
+    _store_class(msgtype)
+    return typestore().hash_rihs01(msgtype)
+
+
+def leading_stamp_ns(data: bytes | bytearray | memoryview) -> int:
+    """The builtin_interfaces/Time [ns] that starts a CDR message's payload.
+
+    That is the header stamp of a message with a ``header`` first (JointState,
+    DiagnosticArray, ...) or the time of a Clock. Raises :class:`MessageError` for bytes too
+    short or without a CDR encapsulation header.
+    """
+    layout: Callable[[Any, int], tuple[int, int]] | None = None
+    if len(data) >= 12:
+        form = _STAMP.get(bytes(data[:2]))
+        layout = form.unpack_from if form is not None else None
+    if layout is None:
+        head = bytes(data[:4]).hex()
+        raise MessageError(
+            f"not a CDR message with a leading time stamp ({len(data)} bytes, starting {head!r})"
+        )
+    sec, nanosec = layout(data, 4)
+    return sec * 1_000_000_000 + nanosec
