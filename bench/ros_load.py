@@ -3,14 +3,14 @@
     python bench/ros_load.py [--duration 600] [--model shipped] [--allow-unmodelled]
                              [--goal-period 8] [--keep DIR]
 
-Starts the node suite for cell ``five_ur5`` (one ``arm_planner`` per arm, ``sim_bridge`` at
-100 Hz, ``recorder``) as separate processes on the embedded runtime, loopback only, in a DDS
-domain of its own, in wall time. The episode is scenario 0 of seed 0; to keep every arm moving
-for the whole run this script republishes each arm's goal every ``--goal-period`` seconds,
-alternating between the scenario's goal and start (the bridge runs with
-``stop_on_collision:=false`` and ``stop_on_success:=false``, so the episode never ends; collisions
-are counted). After ``--duration`` s the planners and the bridge get SIGINT, then the
-recorder, and the MCAP log is read.
+Starts the node suite for cell ``five_ur5`` (one ``arm_planner`` per arm, ``sim_bridge`` at 100 Hz,
+``recorder``) as separate rclpy processes (ROS 2 Jazzy, Fast DDS, discovery on this machine only),
+in a DDS domain of its own, in wall time. The episode is scenario 0 of seed 0; to keep every arm
+moving for the whole run this script republishes each arm's goal every ``--goal-period`` seconds,
+alternating between the scenario's goal and start (the bridge runs with ``stop_on_collision:=false``
+and ``stop_on_success:=false``, so the episode never ends; collisions are counted). After
+``--duration`` s the planners and the bridge get SIGINT, then the recorder, and the recorder's bag
+is read.
 
 Reported (``bench/results/ros_load.json`` and ``.md``):
 
@@ -47,9 +47,17 @@ from _report import machine_at_end, write_report
 from nehmo_core.logs import iter_log, summarize
 from nehmo_core.logs.messages import DiagnosticArray, DiagnosticStatus
 from nehmo_core.logs.topics import COLLISIONS_TOPIC
+from nehmo_core.logs.writer import remove_bag
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
-from nehmo_ros.orchestrate import Process, SuiteSettings, child_env, isolated_domain, node_command
+from nehmo_ros.orchestrate import (
+    Process,
+    SuiteSettings,
+    child_env,
+    isolated_domain,
+    node_command,
+    reported_rmw,
+)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PERIOD_MS, TOLERANCE_MS = 40.0, 5.0
@@ -131,14 +139,19 @@ class GoalCycler:
 
     def __init__(self, domain: int, goals: dict[str, list[dict[str, Any]]]) -> None:
         os.environ["ROS_DOMAIN_ID"] = str(domain)
-        from nehmo_ros import ros
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        import rclpy
+        from rclpy.node import Node
+        from rclpy.qos import DurabilityPolicy, QoSProfile
+        from sensor_msgs.msg import JointState
 
-        self.ros = ros
-        ros.init(args=["ros_load"])
-        self.node = ros.Node("ros_load_goals")
-        latched = ros.QoSProfile(depth=1, durability=ros.DurabilityPolicy.TRANSIENT_LOCAL)
+        self.rclpy = rclpy
+        self.message = JointState
+        rclpy.init(args=["ros_load"])
+        self.node = Node("ros_load_goals")
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pubs = {
-            a: self.node.create_publisher(ros.msg.JointState, f"/{a}/goal", latched) for a in goals
+            a: self.node.create_publisher(JointState, f"/{a}/goal", latched) for a in goals
         }
         self.goals = goals
         self.count = 0
@@ -147,13 +160,12 @@ class GoalCycler:
         self.count += 1
         for arm_id, (goal, start) in self.goals.items():
             target = start if self.count % 2 else goal
-            msg = self.ros.msg.JointState()
-            msg.name, msg.position = target["name"], target["position"]
+            msg = self.message(name=target["name"], position=target["position"])
             self.pubs[arm_id].publish(msg)
 
     def close(self) -> None:
         self.node.destroy_node()
-        self.ros.try_shutdown()
+        self.rclpy.try_shutdown()
 
 
 def stop_all(procs: dict[str, Process], names: list[str], timeout: float) -> dict[str, Any]:
@@ -177,8 +189,8 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
     scenario_set = generate_scenario_set(cell, 0, 1)
     scenario_file = save_scenario_set(scenario_set, out / "scenarios.json")
     scenario = scenario_set.scenarios[0]
-    log = out / "ros_load.mcap"
-    log.unlink(missing_ok=True)
+    log = out / "ros_load_bag"
+    remove_bag(log)
     procs: dict[str, Process] = {}
 
     def launch(name: str, module: str, params: dict[str, Any]) -> Process:
@@ -261,6 +273,8 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
             if sim_s
             else None,
             "cell": cell.name,
+            "scenario": {"seed": 0, "index": 0},
+            "rmw": reported_rmw(outputs["bridge"]),
             "model": args.model,
             "allow_unmodelled": args.allow_unmodelled,
             "duration_s": args.duration,
@@ -362,7 +376,8 @@ def markdown(r: dict[str, Any]) -> str:
     lines = [
         f"# Load: {r['duration_s']:.0f} s, cell {r['cell']} (5 planners, bridge, recorder)",
         "",
-        f"{r['machine']}; model {r['model']}; goals alternate every {r['goal_period_s']:g} s;"
+        f"{r['machine']}; rclpy on {r.get('rmw') or '?'}; scenario 0 of seed 0; model {r['model']};"
+        f" goals alternate every {r['goal_period_s']:g} s;"
         f" exit codes {r['exit_codes']}; {r['log_messages']} messages logged,"
         f" {r['collision_messages']} collision messages (colliding steps by pair, self-collisions"
         f" as a-a: {r['collision_steps_by_pair']}; "

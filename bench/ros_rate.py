@@ -2,15 +2,15 @@
 
     python bench/ros_rate.py [--seconds 60] [--cell triple_ur5] [--model shipped]
 
-Starts the node suite as separate processes (embedded runtime, loopback, own DDS domain) in
-real time (wall-clock stamps, no /clock), lets it run ``--seconds``, stops it with SIGINT and
-reads the MCAP log. Per arm it reports the command periods measured two ways: at the planner
-(its timer's publish instants, ``publish_wall_ns`` in ``/<arm>/planner/status``) and at the
-recorder (receive times of ``/<arm>/velocity_controller/commands``), as percentiles and as the
-share within 40 ± 5 ms (target ≥ 99 %), plus deadline misses and fail-safes. Results go to
-``bench/results/ros_rate.json`` and ``.md``. The episode is scenario 0 of seed 0 of the cell;
-arms that reach their goals keep planning (and commanding zero) until the end.
-"""
+Starts the node suite as separate rclpy processes (ROS 2 Jazzy, Fast DDS, discovery on this machine
+only, own DDS domain) in real time (wall-clock stamps, no /clock), lets it run ``--seconds``, stops
+it with SIGINT and reads the recorder's bag. Per arm it reports the command periods measured two
+ways: at the planner (its timer's publish instants, ``publish_wall_ns`` in
+``/<arm>/planner/status``) and at the recorder (receive times of
+``/<arm>/velocity_controller/commands``), as percentiles and as the share within 40 ± 5 ms (target ≥
+99 %), plus deadline misses and fail-safes. Results go to ``bench/results/ros_rate.json`` and
+``.md``. The episode is scenario 0 of seed 0 of the cell; arms that reach their goals keep planning
+(and commanding zero) until the end."""
 
 from __future__ import annotations
 
@@ -29,7 +29,14 @@ from nehmo_core.logs import iter_log
 from nehmo_core.logs.messages import DiagnosticStatus
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
-from nehmo_ros.orchestrate import Process, SuiteSettings, child_env, isolated_domain, node_command
+from nehmo_ros.orchestrate import (
+    Process,
+    SuiteSettings,
+    child_env,
+    isolated_domain,
+    node_command,
+    reported_rmw,
+)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PERIOD_MS, TOLERANCE_MS = 40.0, 5.0
@@ -86,7 +93,7 @@ def run(cell_name: str, model: str, seconds: float, out: Path) -> dict[str, Any]
     domain = isolated_domain()
     env = child_env(settings, domain)
     scenario_file = save_scenario_set(generate_scenario_set(cell, 0, 1), out / "scenarios.json")
-    log = out / "ros_rate.mcap"
+    log = out / "ros_rate_bag"
     procs: list[Process] = []
     try:
         recorder = Process(
@@ -130,14 +137,23 @@ def run(cell_name: str, model: str, seconds: float, out: Path) -> dict[str, Any]
     finally:
         codes = {p.name: p.stop(10.0) for p in reversed(procs)}
     per_arm = analyse(log, list(cell.arm_ids), skip_s=1.0)
-    return {"cell": cell.name, "model": model, "seconds": seconds, "exit_codes": codes, **per_arm}
+    return {
+        "cell": cell.name,
+        "model": model,
+        "scenario": {"seed": 0, "index": 0},
+        "rmw": reported_rmw(procs[-1].output()) if procs else "",
+        "seconds": seconds,
+        "exit_codes": codes,
+        **per_arm,
+    }
 
 
 def markdown(result: dict[str, Any]) -> str:
     lines = [
         f"# Command periods over {result['seconds']:.0f} s, cell {result['cell']}",
         "",
-        f"{result['machine']}; model {result['model']}; target: ≥ 99 % within 40 ± 5 ms.",
+        f"{result['machine']}; rclpy on {result.get('rmw') or '?'}; model {result['model']};"
+        f" scenario 0 of seed 0; target: ≥ 99 % within 40 ± 5 ms.",
         "",
         "| arm | where | periods | within 40±5 ms | p0.1 / p1 / p50 / p99 / p99.9 [ms] | max |"
         " misses | fail-safes |",

@@ -2,6 +2,27 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
 import torch
 
+REPO = Path(__file__).resolve().parent.parent
+
 torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="session")
+def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``ros_ws/`` built with colcon into a temporary directory; its install space."""
+    base = tmp_path_factory.mktemp("colcon")
+    colcon = Path(sys.executable).parent / "colcon"
+    argv = [str(colcon), "--log-base", str(base / "log"), "build"]
+    argv += ["--build-base", str(base / "build"), "--install-base", str(base / "install")]
+    proc = subprocess.run(
+        argv, cwd=REPO / "ros_ws", capture_output=True, text=True, timeout=600, check=False
+    )
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return base / "install"

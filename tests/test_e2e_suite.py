@@ -1,7 +1,9 @@
 """The node suite end to end: bridge, two planners and the recorder as separate processes.
 
 One dual-UR5 episode (scenario 11 of seed 0: the naive planner collides 2.2 s in, so the arms
-must coordinate) runs through ``orchestrate`` on rclpy, in this test run's own DDS domain, with
+must coordinate) runs through ``orchestrate`` on rclpy as a ROS user runs the nodes: ``ros_ws``
+built with colcon, ``install/setup.bash`` sourced, the install space's executables started. It
+runs in this test run's own DDS domain, with
 the synthetic pair value models (fast to compile; what this test checks is the suite, not the
 models). Meanwhile a plain rclpy node (no nehmo code) listens to the bridge's joint states,
 a planner's commands and ``/diagnostics``. Tolerance against the batch
@@ -39,7 +41,7 @@ def scenario_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def suite(scenario_file: Path) -> tuple[EpisodeRun, list[dict[str, Any]]]:
+def suite(scenario_file: Path, colcon_install: Path) -> tuple[EpisodeRun, list[dict[str, Any]]]:
     """The orchestrated episode, and what the plain rclpy listener received."""
     topics = ["/ur5_0/joint_states", "/ur5_0/velocity_controller/commands", "/diagnostics"]
     reader = start("listen", "150", *topics)
@@ -50,12 +52,26 @@ def suite(scenario_file: Path) -> tuple[EpisodeRun, list[dict[str, Any]]]:
             time_limit=20.0,
             domain_id=DOMAIN_ID,
             startup_timeout=240.0,  # generous: a loaded CI machine starts processes slowly
+            install_space=str(colcon_install),
         )
         run = run_ros_episode(scenario_file, INDEX, scenario_file.parent, settings)
     finally:
         _, out, _ = finish(reader, timeout=10)
     received = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
     return run, received
+
+
+def test_the_nodes_ran_from_the_install_space(suite: Any, colcon_install: Path) -> None:
+    run, _ = suite
+    assert run.rmw == "rmw_fastrtps_cpp"
+    logs = run.log.parent / "logs" / run.log.name
+    commands = json.loads((logs / "commands.json").read_text())
+    assert set(commands) == {"recorder", "planner_ur5_0", "planner_ur5_1", "sim_bridge"}
+    for name, argv in commands.items():
+        assert argv[0] == "bash" and f'source "{colcon_install}/setup.bash"' in argv[2], name
+        package = "sim_bridge" if name == "sim_bridge" else "nehmo_ros"
+        assert f"{colcon_install}/{package}/lib/{package}/" in argv[2], name
+    assert "episode started" in (logs / "sim_bridge.log").read_text()
 
 
 @pytest.fixture(scope="module")

@@ -71,8 +71,7 @@ class World:
         self.node = n = Node("fake_world")
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.state_pubs = {
-            a: n.create_publisher(JointState, f"/{a}/joint_states", 10)
-            for a in self.cell.arm_ids
+            a: n.create_publisher(JointState, f"/{a}/joint_states", 10) for a in self.cell.arm_ids
         }
         self.goal_pubs = {
             a: n.create_publisher(JointState, f"/{a}/goal", latched) for a in self.cell.arm_ids

@@ -7,11 +7,11 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+import rclpy.node
 from _ros_testutil import in_process
+from std_msgs.msg import Float64MultiArray
 
 from nehmo_core.logs import command_topic
-import rclpy.node
-from std_msgs.msg import Float64MultiArray
 from nehmo_ros.arm_planner import ArmPlannerNode
 
 

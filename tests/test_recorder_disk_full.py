@@ -17,13 +17,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import rclpy.node
 from _ros_testutil import in_process
+from sensor_msgs.msg import JointState as RosJointState
 
 import nehmo_core.logs.writer as writer_module
-from nehmo_core.logs import JointState, joint_states_topic, read_log
+from nehmo_core.logs import joint_states_topic, read_log
 from nehmo_core.logs.recover import recover
-import rclpy.node
-from sensor_msgs.msg import JointState as RosJointState
 from nehmo_ros.recorder import RecorderNode
 
 TOPIC = joint_states_topic("ur5_0")

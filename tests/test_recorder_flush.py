@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from _ros_testutil import in_process
-
-from nehmo_core.logs import JointState, joint_states_topic, read_log
-from nehmo_core.logs.recover import recover
 import rclpy.node
+from _ros_testutil import in_process
 from sensor_msgs.msg import JointState as RosJointState
+
+from nehmo_core.logs import joint_states_topic, read_log
+from nehmo_core.logs.recover import recover
 from nehmo_ros.recorder import RecorderNode
 
 NAMES = ["a", "b"]

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from nehmo_ros.demo import main as demo_main
 from nehmo_core.errors import InvalidValueError, UnknownNameError
+from nehmo_ros.demo import main as demo_main
 from nehmo_ros.orchestrate import SuiteSettings
 
 

@@ -78,7 +78,8 @@ PARAMS: dict[str, Param] = {
     "arm_id": Param("", "id of the arm this node commands (one of the cell's arms)"),
     "cell": Param("", "shipped cell name (dual_ur5, ...) or a cell YAML path"),
     "planner": Param(
-        "nehmo", "nehmo | nehmo_paper | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless"
+        "nehmo",
+        "nehmo | nehmo_paper | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless",
     ),
     "model": Param("shipped", "shipped | synthetic | [KIND=]PATH,... (run dir or .safetensors)"),
     "rate": Param(25.0, "[Hz] command rate", 1e-3, 1000.0),
@@ -276,9 +277,7 @@ class ArmPlannerNode(Node):
         decision = self.controller.tick(now, stamp_ns)
         if not self._ready:
             if not decision.ready:  # nothing to command yet: the bridge's watchdog holds the arm
-                self.get_logger().info(
-                    f"waiting ({decision.status})", throttle_duration_sec=2.0
-                )
+                self.get_logger().info(f"waiting ({decision.status})", throttle_duration_sec=2.0)
                 return
             self._ready = True
             self.get_logger().info("planning")

@@ -14,7 +14,7 @@ get SIGINT (SIGKILL after a bounded wait). Every episode bag (``<out>/episode_NN
 layout) is evaluated with
 :mod:`nehmo_core.eval.metrics` (the batch runner's metrics); the per-episode results and the
 aggregate (SR, CR, planning time, MPL) go to ``<out>/summary.json``. Process output goes to
-``<out>/logs/``.
+``<out>/logs/<episode>/`` (``commands.json`` there holds every process's command line).
 
 ``replay`` republishes a bag's topics through rclpy with their recorded timing (scaled by
 ``--rate``), for inspection with other tools or re-recording; ``evaluate`` prints the metrics of
@@ -68,6 +68,9 @@ class SuiteSettings:
     nice: int = 0  # added niceness of the children
     extra_planner_args: tuple[str, ...] = ()
     env: dict[str, str] = field(default_factory=dict)
+    #: A colcon install space (``ros_ws/install``): the nodes then run as its executables after
+    #: sourcing its ``setup.bash``, as a ROS user runs them; '' runs ``python -m <module>``.
+    install_space: str = ""
 
     def __post_init__(self) -> None:
         for name in ("time_limit", "physics_rate", "real_time_factor", "startup_timeout"):
@@ -76,6 +79,12 @@ class SuiteSettings:
         if self.domain_id is not None and not 0 <= self.domain_id <= 232:
             raise InvalidValueError("domain_id", "must lie in [0, 232]", self.domain_id)
         check_row_and_model(self.planner, self.model)
+        if self.install_space and not (Path(self.install_space) / "setup.bash").is_file():
+            raise InvalidValueError(
+                "install_space",
+                "must be a colcon install space (with setup.bash)",
+                self.install_space,
+            )
 
 
 def check_row_and_model(planner: str, model: str) -> None:
@@ -165,13 +174,31 @@ class Process:
         return None if killed else self.proc.returncode
 
 
-def node_command(module: str, params: dict[str, Any], extra: Sequence[str] = ()) -> list[str]:
-    """``python -m <module> --ros-args -p k:=v ...``."""
-    argv = [sys.executable, "-m", module, "--ros-args"]
+#: The console script of each node module: (package, executable).
+EXECUTABLES: dict[str, tuple[str, str]] = {
+    "nehmo_ros.arm_planner": ("nehmo_ros", "arm_planner"),
+    "nehmo_ros.recorder": ("nehmo_ros", "recorder"),
+    "sim_bridge.bridge": ("sim_bridge", "sim_bridge"),
+}
+
+
+def node_command(
+    module: str, params: dict[str, Any], extra: Sequence[str] = (), install_space: str = ""
+) -> list[str]:
+    """``python -m <module> --ros-args -p k:=v ...``; with ``install_space``, the same node as
+    ``<install>/<pkg>/lib/<pkg>/<exe> --ros-args ...`` after sourcing ``<install>/setup.bash``."""
+    args = ["--ros-args"]
     for key, value in params.items():
         text = str(value).lower() if isinstance(value, bool) else str(value)
-        argv += ["-p", f"{key}:={text}"]
-    return argv + list(extra)
+        args += ["-p", f"{key}:={text}"]
+    args += list(extra)
+    if not install_space:
+        return [sys.executable, "-m", module, *args]
+    package, executable = EXECUTABLES[module]
+    install = Path(install_space).resolve()
+    exe = install / package / "lib" / package / executable
+    script = f'source "{install}/setup.bash" && exec "{exe}" "$@"'
+    return ["bash", "-c", script, executable, *args]
 
 
 @dataclass(frozen=True)
@@ -219,14 +246,21 @@ def run_episode(
     start = time.monotonic()
     codes: dict[str, int | None] = {}
     with _processes() as procs:
+        commands: dict[str, list[str]] = {}
 
         def launch(name: str, argv: list[str]) -> Process:
+            commands[name] = argv
+            (logs / "commands.json").write_text(json.dumps(commands, indent=1) + "\n")
             procs.append(Process(name, argv, env, logs / f"{name}.log", settings.nice))
             return procs[-1]
 
         recorder = launch(
             "recorder",
-            node_command("nehmo_ros.recorder", {"cell": cell.name, "output": str(log_path), **sim}),
+            node_command(
+                "nehmo_ros.recorder",
+                {"cell": cell.name, "output": str(log_path), **sim},
+                install_space=settings.install_space,
+            ),
         )
         if not recorder.wait_for("recording", settings.startup_timeout):
             raise NehmoError(f"the recorder did not start:\n{recorder.output()[-2000:]}")
@@ -238,6 +272,7 @@ def run_episode(
                     "nehmo_ros.arm_planner",
                     {**params, **sim},
                     ["-r", f"__node:=arm_planner_{arm_id}", *settings.extra_planner_args],
+                    settings.install_space,
                 ),
             )
         bridge = launch(
@@ -256,6 +291,7 @@ def run_episode(
                     "start_timeout": settings.startup_timeout,
                     "planners": settings.planner,
                 },
+                install_space=settings.install_space,
             ),
         )
         budget = settings.startup_timeout + settings.time_limit / settings.real_time_factor + 30
@@ -270,9 +306,7 @@ def run_episode(
     rmw = reported_rmw(bridge.output())
     if failed:
         detail = "; ".join(f"{n}: exit {c}" for n, c in failed.items())
-        return EpisodeRun(
-            episode, log_path, None, codes, wall, f"processes failed ({detail})", rmw
-        )
+        return EpisodeRun(episode, log_path, None, codes, wall, f"processes failed ({detail})", rmw)
     try:
         result = evaluate_log(log_path)
     except NehmoError as exc:
@@ -422,6 +456,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--physics-rate", type=float, default=100.0, help="[Hz]")
     run.add_argument("--real-time-factor", type=float, default=1.0)
     run.add_argument("--domain-id", type=int, help="DDS domain (default: one for this run)")
+    run.add_argument(
+        "--install-space",
+        default="",
+        help="run the nodes from a colcon install space (ros_ws/install)",
+    )
     run.add_argument("--out", default="nehmo_runs", help="output directory")
     run.add_argument("--render", action="store_true", help="render the first episode")
     ev = sub.add_parser("evaluate", help="metrics of episode logs")
@@ -446,6 +485,7 @@ def _run(args: argparse.Namespace) -> int:
         physics_rate=args.physics_rate,
         real_time_factor=args.real_time_factor,
         domain_id=args.domain_id,
+        install_space=args.install_space,
     )
     summary = run_suite(scenario_file, _episodes(args.episodes, count), out_dir, settings)
     print(format_metrics(summary["metrics"]))

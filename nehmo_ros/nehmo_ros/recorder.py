@@ -30,13 +30,12 @@ Parameters: ``cell`` (required), ``output`` (bag directory; default ``nehmo_<dat
 
 from __future__ import annotations
 
+import importlib
 import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
-
-import importlib
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node

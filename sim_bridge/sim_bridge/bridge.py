@@ -60,7 +60,7 @@ from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.eval.episode_log import EPISODE_FORMAT, EPISODE_FORMAT_VERSION, cell_metadata
 from nehmo_core.eval.metrics import goal_distance
 from nehmo_core.eval.setups import SUCCESS_NORMS, parse_row
-from nehmo_core.eval.telemetry import collisions_message, stamp
+from nehmo_core.eval.telemetry import collisions_message
 from nehmo_core.logs.messages import serialize
 from nehmo_core.logs.topics import (
     CLOCK_TOPIC,
@@ -101,7 +101,9 @@ PARAMS: dict[str, Param] = {
     "start_timeout": Param(60.0, "[s] longest wait for the planners"),
     "start_delay": Param(0.5, "[s] extra wait after the planners appear (discovery settles)"),
     "exit_when_done": Param(False, "exit 0.5 s after the episode ends"),
-    "planners": Param("", "row of planner kinds for the metadata, e.g. nehmo or ur5_0=nehmo,ur5_1=naive"),
+    "planners": Param(
+        "", "row of planner kinds for the metadata, e.g. nehmo or ur5_0=nehmo,ur5_1=naive"
+    ),
 }
 #: The parameters' defaults.
 DEFAULTS: dict[str, Any] = {name: p.default for name, p in PARAMS.items()}
@@ -232,8 +234,7 @@ class SimBridgeNode(Node):
             for a in self.cell.arm_ids
         }
         self.goal_pubs = {
-            a: n.create_publisher(JointState, goal_topic(a), LATCHED)
-            for a in self.cell.arm_ids
+            a: n.create_publisher(JointState, goal_topic(a), LATCHED) for a in self.cell.arm_ids
         }
         self.scenario_pub = n.create_publisher(String, SCENARIO_TOPIC, LATCHED)
         self.collision_pub = n.create_publisher(DiagnosticArray, COLLISIONS_TOPIC, HISTORY)
