@@ -44,7 +44,9 @@ def _netns_unavailable() -> str:
     return ""
 
 
-pytestmark = pytest.mark.skipif(bool(_netns_unavailable()), reason=_netns_unavailable() or "-")
+_UNAVAILABLE = _netns_unavailable()
+if _UNAVAILABLE:
+    pytest.skip(_UNAVAILABLE, allow_module_level=True)
 
 CELL = load_cell("dual_ur5")
 SEED, INDEX = 0, 11
@@ -54,7 +56,7 @@ STOP_TIMEOUT = 10.0  # [s] after SIGINT before SIGKILL
 PREFIX = f"nehmo-mh-{os.getpid()}-"  # every namespace of this test run starts with it
 SUBNET = "10.231.0"
 DEVICE = "eth0"  # a host's end of its veth (in the host's namespace)
-MIN_RX_BYTES = 100_000  # a planner host must receive at least this much during the episode
+MIN_RX_BYTES = 100_000  # every host receives more than this during the episode (~1 MB seen)
 
 
 def ip(*args: str) -> str:
@@ -302,7 +304,7 @@ def test_the_traffic_crossed_the_veths(multi_host: MultiHostRun) -> None:
     rx = multi_host.rx_bytes
     for arm_id in CELL.arm_ids:  # clock, states and goals from the sim host
         assert rx[arm_id] > MIN_RX_BYTES, rx
-    assert rx["sim"] > MIN_RX_BYTES // 10, rx  # commands and diagnostics from the planners
+    assert rx["sim"] > MIN_RX_BYTES, rx  # commands and diagnostics from the planners
 
 
 def test_no_namespace_of_the_test_remains(request: pytest.FixtureRequest) -> None:

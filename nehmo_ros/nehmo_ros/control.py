@@ -325,6 +325,8 @@ class SolveWorker:
         """Stop taking jobs (a job in flight is allowed to finish within ``timeout``)."""
         with self._cond:
             self._stopped = True
+            if self._thread is None and self._job is not None:  # submitted, never started
+                self._job, self._busy = None, False
             self._cond.notify_all()
         if self._thread is not None:
             self._thread.join(timeout)
