@@ -185,6 +185,7 @@ class ArmPlannerNode(Node):
         self.kind = p["planner"]
         self._last_publish: float | None = None
         self._ready = False
+        self.hung = False  # set at the stop: a solve still running (see run_main)
         self._diagnostics_due = 0
         #: Messages published and joint states received (printed at the stop, for load tests).
         self.published = {"commands": 0, "statuses": 0}
@@ -367,6 +368,7 @@ class ArmPlannerNode(Node):
         """Command a stop once (if the middleware is still up) and end the worker thread."""
         self.timer.cancel()
         self.controller.stop()
+        self.hung = not self.controller.wait_idle(1.0)  # a solve that never returns
         if rclpy.ok():
             command = Float64MultiArray(data=[0.0] * self.robot.dof)
             self.command_pub.publish(command)

@@ -237,6 +237,17 @@ def run_main(
             executor.remove_node(node)
             executor.shutdown(timeout_sec=1.0)
             node.destroy_node()
+        if getattr(node, "hung", False):
+            # A callback that never returns (a hung solver) would keep the executor's worker
+            # thread, and with it the process, alive at interpreter exit.
+            print(
+                f"{program}: a callback is still running after the stop; exiting without it",
+                file=sys.stderr,
+                flush=True,
+            )
+            rclpy.try_shutdown()
+            sys.stdout.flush()
+            os._exit(0)
         return 0
     finally:
         rclpy.try_shutdown()
