@@ -18,7 +18,6 @@ def run_listen(seconds: float, topics: list[str]) -> int:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.node import Node
-    from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
@@ -40,7 +39,7 @@ def run_listen(seconds: float, topics: list[str]) -> int:
 
     for topic in topics:
         if topic.endswith("joint_states"):
-            node.create_subscription(JointState, topic, printer(topic), qos_profile_sensor_data)
+            node.create_subscription(JointState, topic, printer(topic), 100)  # reliable
         elif topic.endswith("commands"):
             node.create_subscription(Float64MultiArray, topic, printer(topic), 10)
         else:

@@ -372,39 +372,59 @@ def format_metrics(metrics: dict[str, Any] | None) -> str:
 
 
 # ----------------------------------------------------------------------------------- replay
-def replay(path: Path, rate: float, topics: Sequence[str] | None, domain_id: int | None) -> int:
+def replay(
+    path: Path,
+    rate: float,
+    topics: Sequence[str] | None,
+    domain_id: int | None,
+    wait_s: float = 1.0,
+) -> int:
     """Republish the messages of a bag through rclpy with their recorded timing (× 1/rate).
 
-    The serialized bytes go out as recorded; goals and the scenario are latched as the bridge
-    publishes them.
+    Every topic's publisher is created first, then ``wait_s`` seconds pass for discovery before
+    the first message. The serialized bytes go out as recorded; goals and the scenario are
+    latched as the bridge publishes them. Topics of types this ROS install lacks are skipped
+    (and listed).
     """
     import rclpy
     from rclpy.node import Node
     from rclpy.qos import DurabilityPolicy, QoSProfile
 
-    from nehmo_core.logs import iter_log
+    from nehmo_core.logs import iter_log, summarize
     from nehmo_ros.recorder import is_latched, message_class
 
     if not rate > 0:
         raise InvalidValueError("rate", "must be > 0", rate)
+    if not wait_s >= 0:
+        raise InvalidValueError("wait", "must be >= 0 [s]", wait_s)
     if domain_id is not None:
         os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+    in_bag = summarize(path).topics
+    wanted = list(in_bag) if not topics else list(topics)
+    unknown = sorted(set(wanted) - set(in_bag))
+    if unknown:
+        raise InvalidValueError("topics", f"must be topics of {path} {sorted(in_bag)}", unknown)
     rclpy.init(args=["orchestrate_replay"])
     node = Node("nehmo_replay")
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     pubs: dict[str, Any] = {}
+    skipped = []
+    for topic in wanted:
+        try:
+            msg_class = message_class(in_bag[topic][0])
+        except (ImportError, AttributeError, ValueError):
+            skipped.append(topic)
+            continue
+        qos = latched if is_latched(topic) else 100
+        pubs[topic] = node.create_publisher(msg_class, topic, qos)
+    if skipped:
+        print(f"skipping topics of unknown types: {skipped}", file=sys.stderr)
+    time.sleep(wait_s)
     count, t0_log, t0_wall = 0, None, time.monotonic()
     try:
-        for rec in iter_log(path, topics):
+        for rec in iter_log(path, list(pubs)):
             if not rclpy.ok():
                 break
-            if rec.topic not in pubs:
-                try:
-                    msg_class = message_class(rec.msgtype)
-                except (ImportError, AttributeError, ValueError):
-                    continue
-                qos = latched if is_latched(rec.topic) else 100
-                pubs[rec.topic] = node.create_publisher(msg_class, rec.topic, qos)
             t0_log = rec.log_time_ns if t0_log is None else t0_log
             due = t0_wall + (rec.log_time_ns - t0_log) / 1e9 / rate
             delay = due - time.monotonic()
@@ -412,6 +432,7 @@ def replay(path: Path, rate: float, topics: Sequence[str] | None, domain_id: int
                 time.sleep(delay)
             pubs[rec.topic].publish(rec.data)
             count += 1
+        time.sleep(min(wait_s, 0.5))  # reliable subscribers fetch the last messages
     except KeyboardInterrupt:
         pass
     finally:
@@ -470,6 +491,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--rate", type=float, default=1.0, help="playback speed factor")
     rp.add_argument("--topics", nargs="*", help="only these topics")
     rp.add_argument("--domain-id", type=int)
+    rp.add_argument(
+        "--wait", type=float, default=1.0, help="[s] for discovery before the first message"
+    )
     return parser
 
 
@@ -525,7 +549,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(format_metrics(aggregate(results).to_dict()))
             return 0
         with _readable(args.log):
-            return replay(Path(args.log), args.rate, args.topics, args.domain_id)
+            return replay(Path(args.log), args.rate, args.topics, args.domain_id, args.wait)
     except (NehmoError, OSError) as exc:
         print(f"orchestrate: error: {one_line(exc)}", file=sys.stderr)
         return 2
