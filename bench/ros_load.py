@@ -231,6 +231,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                 "stop_on_collision": False,
                 "stop_on_success": False,  # arms at the scenario's goals: the episode runs on
                 "planners": "nehmo",
+                "min_subscribers": len(cell.arm_ids) + 1,  # every planner and the recorder
             },
         )
         if not bridge.wait_for("episode started", 120):

@@ -128,6 +128,7 @@ def run(cell_name: str, model: str, seconds: float, out: Path) -> dict[str, Any]
             "scenarios": str(scenario_file),
             "time_limit": 3600.0,
             "planners": "nehmo",
+            "min_subscribers": len(cell.arm_ids) + 1,  # every planner and the recorder
         }
         argv = node_command("sim_bridge.bridge", bridge_params)
         procs.append(Process("bridge", argv, env, out / "bridge.log", 0))

@@ -25,6 +25,7 @@ def child_env(**extra: str) -> dict[str, str]:
     env["ROS_DOMAIN_ID"] = str(DOMAIN_ID)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env.pop("ROS_STATIC_PEERS", None)
+    env.setdefault("FASTDDS_BUILTIN_TRANSPORTS", "UDPv4")  # as orchestrate runs the nodes
     paths = [str(REPO / "nehmo_core"), str(REPO / "nehmo_ros"), env.get("PYTHONPATH", "")]
     env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
     env.update(extra)

@@ -56,6 +56,9 @@ def _bad_commands(arm_id: str, seconds: float) -> None:
         node = Node("bad_commands")
         topic = f"/{arm_id}/velocity_controller/commands"
         pub = node.create_publisher(Float64MultiArray, topic, 10)
+        matched = time.monotonic() + 30.0  # discovery of the subscriptions
+        while pub.get_subscription_count() < 3 and time.monotonic() < matched:  # bridge, 2 recorders
+            time.sleep(0.02)
         end, k = time.monotonic() + seconds, 0
         while time.monotonic() < end:
             pub.publish(Float64MultiArray(data=bad[k % len(bad)]))
@@ -112,6 +115,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
                 "time_limit": 120.0,
                 "start_timeout": STARTUP_S,
                 "command_timeout": COMMAND_TIMEOUT,
+                "min_subscribers": 4,  # both planners and both recorders hear every state
             },
         )
         _wait(procs["bridge"], "episode started")

@@ -212,6 +212,7 @@ def run_on_hosts(scenario_file: Path, out_dir: Path) -> MultiHostRun:
                         "time_limit": TIME_LIMIT,
                         "start_timeout": STARTUP_TIMEOUT,
                         "planners": "nehmo",
+                        "min_subscribers": 3,  # both planners and the recorder
                     },
                 ),
             )

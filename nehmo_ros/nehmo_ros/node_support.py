@@ -26,7 +26,12 @@ from typing import Any, Protocol
 import rclpy
 import rclpy.exceptions
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import (
+    Executor,
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    SingleThreadedExecutor,
+)
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
@@ -185,7 +190,7 @@ def run_main(
     argv: Sequence[str] | None,
     drain_s: float = 0.0,
     usage: str | None = None,
-    threads: int = 2,
+    threads: int = 1,
 ) -> int:
     """Init rclpy, build the node, spin until SIGINT/SIGTERM, stop cleanly.
 
@@ -221,7 +226,9 @@ def run_main(
         if threading.current_thread() is threading.main_thread():
             for signum in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(signum, on_signal)
-        executor = MultiThreadedExecutor(num_threads=threads)
+        executor: Executor = (
+            MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
+        )
         executor.add_node(node)
         settle_heap()
         try:

@@ -126,6 +126,9 @@ def child_env(settings: SuiteSettings, domain_id: int) -> dict[str, str]:
     )
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # this machine only, unless overridden
     env.pop("ROS_STATIC_PEERS", None)
+    # UDP only: with Fast DDS's shared-memory transport a SIGKILLed node stalled the surviving
+    # ones (bridge steps up to 5 s apart) until its port was given up.
+    env.setdefault("FASTDDS_BUILTIN_TRANSPORTS", "UDPv4")
     env.update(settings.env)
     return env
 
@@ -290,6 +293,7 @@ def run_episode(
                     "real_time_factor": settings.real_time_factor,
                     "start_timeout": settings.startup_timeout,
                     "planners": settings.planner,
+                    "min_subscribers": len(kinds) + 1,  # every planner and the recorder
                 },
                 install_space=settings.install_space,
             ),

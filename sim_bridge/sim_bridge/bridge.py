@@ -100,6 +100,9 @@ PARAMS: dict[str, Param] = {
     "wait_for_planners": Param(True, "start when every arm's command topic has a publisher"),
     "start_timeout": Param(60.0, "[s] longest wait for the planners"),
     "start_delay": Param(0.5, "[s] extra wait after the planners appear (discovery settles)"),
+    "min_subscribers": Param(
+        0, "with wait_for_planners: also wait until each joint-state topic has this many readers"
+    ),
     "exit_when_done": Param(False, "exit 0.5 s after the episode ends"),
     "planners": Param(
         "", "row of planner kinds for the metadata, e.g. nehmo or ur5_0=nehmo,ur5_1=naive"
@@ -133,6 +136,7 @@ class BridgeSettings:
     wait_for_planners: bool
     start_timeout: float
     start_delay: float
+    min_subscribers: int
     exit_when_done: bool
 
     def __post_init__(self) -> None:
@@ -154,6 +158,8 @@ class BridgeSettings:
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))
         if not self.start_delay >= 0:
             raise InvalidValueError("start_delay", "must be >= 0 [s]", self.start_delay)
+        if self.min_subscribers < 0:
+            raise InvalidValueError("min_subscribers", "must be >= 0", self.min_subscribers)
         if self.success_norm not in SUCCESS_NORMS:
             raise UnknownNameError("success_norm", self.success_norm, SUCCESS_NORMS)
 
@@ -221,6 +227,7 @@ class SimBridgeNode(Node):
             wait_for_planners=bool(p["wait_for_planners"]),
             start_timeout=float(p["start_timeout"]),
             start_delay=float(p["start_delay"]),
+            min_subscribers=int(p["min_subscribers"]),
             exit_when_done=bool(p["exit_when_done"]),
         )
         kinds = parse_row(p["planners"], self.cell) if p["planners"] else {}
@@ -252,10 +259,12 @@ class SimBridgeNode(Node):
         self.velocity_limits = {
             a.arm_id: np.array([j.velocity for j in a.robot.joints]) for a in self.cell.arms
         }
-        for a in self.cell.arm_ids:
-            n.create_subscription(
+        self.command_subs = {
+            a: n.create_subscription(
                 Float64MultiArray, command_topic(a), self._command_callback(a), 10
             )
+            for a in self.cell.arm_ids
+        }
         self.t_ns = 0  # simulated time since the episode start [ns]
         self.started = False
         self.outcome = ""
@@ -417,10 +426,16 @@ class SimBridgeNode(Node):
         self._publish_state(velocities)
 
     def _maybe_start(self) -> None:
-        """Start the episode once every arm's command topic has a publisher (a planner is up)
-        plus ``start_delay`` for discovery to settle, or after ``start_timeout``."""
+        """Start the episode once every arm's command topic has a matched publisher (a planner
+        is up) and every joint-state topic ``min_subscribers`` matched readers (planners and
+        recorder), plus ``start_delay`` for discovery to settle, or after ``start_timeout``."""
         now = time.monotonic()
-        missing = [a for a in self.cell.arm_ids if self.count_publishers(command_topic(a)) < 1]
+        missing = [a for a in self.cell.arm_ids if self.command_subs[a].get_publisher_count() < 1]
+        missing += [
+            f"{a} (joint-state readers {pub.get_subscription_count()} < {self.s.min_subscribers})"
+            for a, pub in self.state_pubs.items()
+            if pub.get_subscription_count() < self.s.min_subscribers
+        ]
         if self.s.wait_for_planners and now - self.created < self.s.start_timeout:
             if missing:
                 self._ready_at = math.inf
