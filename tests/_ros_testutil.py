@@ -57,9 +57,9 @@ class Spinner:
     """One executor for the nodes a test runs in its own process."""
 
     def __init__(self) -> None:
-        from rclpy.executors import MultiThreadedExecutor
+        from rclpy.executors import SingleThreadedExecutor
 
-        self.executor = MultiThreadedExecutor(num_threads=3)
+        self.executor = SingleThreadedExecutor()
         self.nodes: list[Any] = []
 
     def add(self, node: Any) -> None:

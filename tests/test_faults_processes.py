@@ -57,7 +57,9 @@ def _bad_commands(arm_id: str, seconds: float) -> None:
         topic = f"/{arm_id}/velocity_controller/commands"
         pub = node.create_publisher(Float64MultiArray, topic, 10)
         matched = time.monotonic() + 30.0  # discovery of the subscriptions
-        while pub.get_subscription_count() < 3 and time.monotonic() < matched:  # bridge, 2 recorders
+        while (
+            pub.get_subscription_count() < 3 and time.monotonic() < matched
+        ):  # bridge, 2 recorders
             time.sleep(0.02)
         end, k = time.monotonic() + seconds, 0
         while time.monotonic() < end:

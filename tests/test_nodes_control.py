@@ -629,28 +629,3 @@ def test_the_status_of_a_missed_deadline_reads_back_with_its_solve_times() -> No
         assert later["late_solve_tick"] == "0"
     finally:
         c.stop()
-
-
-def test_a_woken_solve_runs_in_the_thread_that_takes_it() -> None:
-    """The node's way: no worker thread; a submitted tick wakes the executor, whose solve
-    callback runs the job; the next tick publishes its command."""
-    woken: list[int] = []
-    planner = RecordingPlanner()
-    c = ArmController(CELL, "ur5_0", planner, SETTINGS, wake=lambda: woken.append(1))  # type: ignore[arg-type]
-    c.set_goal(NAMES, [0.1] * 6)
-    try:
-        _feed(c, 0.0, 1.0)
-        c.tick(0.0)
-        assert woken == [1] and planner.calls == []  # nothing solved until someone takes it
-        solver = threading.Thread(target=c.run_pending_solve)
-        solver.start()
-        solver.join(5.0)
-        assert len(planner.calls) == 1 and planner.calls[0][0] == 1.0
-        _feed(c, 0.04, 2.0)
-        d = c.tick(0.04)
-        assert d.status == "optimal"
-        np.testing.assert_allclose(d.velocity, np.full(6, 0.01))
-        assert woken == [1, 1]
-    finally:
-        c.stop()
-    assert c.wait_idle(0.0)  # the job submitted at the last tick was dropped, never started

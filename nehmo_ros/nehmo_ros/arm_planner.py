@@ -46,7 +46,6 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
@@ -120,9 +119,10 @@ def _level(decision: Decision) -> int:
 class ArmPlannerNode(Node):
     """The node: parameters → planner → controller; timer, subscriptions, publishers.
 
-    Callback groups: the 25 Hz timer has its own, the solve (a guard condition triggered by
-    the tick) its own, the subscriptions a reentrant one; in a multi-threaded executor the
-    timer keeps commanding while the solve runs and joint states keep arriving.
+    It spins in a single-threaded executor; the solve runs in the controller's own thread
+    (:class:`~nehmo_ros.control.SolveWorker`), so the 25 Hz timer never waits on it. (rclpy's
+    multi-threaded executor with the solve in a callback group of its own put only 65-68 % of
+    the command periods within 40 ± 5 ms, against 96-99 % this way: ``bench/ros_rate.py``.)
     """
 
     def __init__(self) -> None:
@@ -174,18 +174,11 @@ class ArmPlannerNode(Node):
             self.get_logger().warning(
                 f"fault_injection={self.fault} is ON: this node fails on purpose (tests only)"
             )
-        self._solve_group = MutuallyExclusiveCallbackGroup()
-        self._solve_trigger = self.create_guard_condition(
-            self._on_solve, callback_group=self._solve_group
-        )
-        self.controller = ArmController(
-            self.cell, arm_id, planner, control, wake=self._solve_trigger.trigger
-        )
+        self.controller = ArmController(self.cell, arm_id, planner, control)
         self.robot = self.cell.arm(arm_id).robot
         self.kind = p["planner"]
         self._last_publish: float | None = None
         self._ready = False
-        self.hung = False  # set at the stop: a solve still running (see run_main)
         self._diagnostics_due = 0
         #: Messages published and joint states received (printed at the stop, for load tests).
         self.published = {"commands": 0, "statuses": 0}
@@ -194,21 +187,15 @@ class ArmPlannerNode(Node):
         self.command_pub = self.create_publisher(Float64MultiArray, command_topic(arm_id), HISTORY)
         self.status_pub = self.create_publisher(DiagnosticStatus, status_topic(arm_id), HISTORY)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, HISTORY)
-        inputs = ReentrantCallbackGroup()
         for other in self.cell.arm_ids:
             self.create_subscription(
                 JointState,
                 joint_states_topic(other),
                 self._state_callback(other),
                 qos_profile_sensor_data,
-                callback_group=inputs,
             )
-        self.create_subscription(
-            JointState, goal_topic(arm_id), self._on_goal, LATCHED, callback_group=inputs
-        )
-        self.timer = self.create_timer(
-            control.period, self._on_tick, callback_group=MutuallyExclusiveCallbackGroup()
-        )
+        self.create_subscription(JointState, goal_topic(arm_id), self._on_goal, LATCHED)
+        self.timer = self.create_timer(control.period, self._on_tick)
         self.get_logger().info(
             f"arm {arm_id} of cell {self.cell.name}: planner {p['planner']} (model "
             f"{p['model']}), {rate:g} Hz, deadline {deadline * 1e3:.1f} ms, peers "
@@ -216,10 +203,6 @@ class ArmPlannerNode(Node):
         )
 
     # -- callbacks ----------------------------------------------------------------------------
-    def _on_solve(self) -> None:
-        """The solve of the latest tick (guard condition, in the solve's callback group)."""
-        self.controller.run_pending_solve()
-
     def _state_callback(self, arm_id: str) -> Callable[[Any], None]:
         return lambda msg: self._on_state(arm_id, msg)
 
@@ -368,7 +351,6 @@ class ArmPlannerNode(Node):
         """Command a stop once (if the middleware is still up) and end the worker thread."""
         self.timer.cancel()
         self.controller.stop()
-        self.hung = not self.controller.wait_idle(1.0)  # a solve that never returns
         if rclpy.ok():
             command = Float64MultiArray(data=[0.0] * self.robot.dof)
             self.command_pub.publish(command)
@@ -388,7 +370,7 @@ class ArmPlannerNode(Node):
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `arm_planner` console script."""
     sys.setswitchinterval(5e-4)  # the timer thread gets the GIL back from the solver quickly
-    return run_main("arm_planner", ArmPlannerNode, argv, usage=__doc__, threads=3)
+    return run_main("arm_planner", ArmPlannerNode, argv, usage=__doc__)
 
 
 if __name__ == "__main__":

@@ -268,31 +268,17 @@ def _zeros(dof: int) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- the worker
 class SolveWorker:
-    """Runs one solve job at a time; the tick thread never waits on it.
+    """A background thread that runs one job at a time; the tick thread never waits on it."""
 
-    Without ``wake`` the worker owns a thread. With ``wake`` it has none: ``submit`` calls
-    ``wake()`` and whoever was woken runs :meth:`run_pending` in its own thread (the ROS node
-    triggers a guard condition whose callback group is the solve's own, so the executor runs
-    the solve while the timer keeps commanding).
-    """
-
-    def __init__(
-        self,
-        solve: Callable[[Observation], Decision],
-        name: str = "solve",
-        wake: Callable[[], None] | None = None,
-    ) -> None:
+    def __init__(self, solve: Callable[[Observation], Decision], name: str = "solve") -> None:
         self._solve = solve
         self._cond = threading.Condition()
         self._job: Observation | None = None
         self._result: Decision | None = None
         self._busy = False
         self._stopped = False
-        self._wake = wake
-        self._thread: threading.Thread | None = None
-        if wake is None:
-            self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
-            self._thread.start()
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+        self._thread.start()
 
     def submit(self, obs: Observation) -> bool:
         """Start solving ``obs``; False (nothing started) while the previous job still runs."""
@@ -301,9 +287,7 @@ class SolveWorker:
                 return False
             self._job, self._result, self._busy = obs, None, True
             self._cond.notify_all()
-        if self._wake is not None:
-            self._wake()
-        return True
+            return True
 
     def take(self) -> Decision | None:
         """The finished result, once (None while running or when nothing was submitted)."""
@@ -322,27 +306,11 @@ class SolveWorker:
             return self._cond.wait_for(lambda: not self._busy, timeout)
 
     def stop(self, timeout: float = 1.0) -> None:
-        """Stop taking jobs (a job in flight is allowed to finish within ``timeout``)."""
+        """Stop the thread (a job in flight is allowed to finish within ``timeout``)."""
         with self._cond:
             self._stopped = True
-            if self._thread is None and self._job is not None:  # submitted, never started
-                self._job, self._busy = None, False
             self._cond.notify_all()
-        if self._thread is not None:
-            self._thread.join(timeout)
-        else:
-            self.wait_idle(timeout)
-
-    def run_pending(self) -> None:
-        """Solve the submitted job, if any, in the calling thread."""
-        with self._cond:
-            job, self._job = self._job, None
-        if job is None:
-            return
-        result = self._solve(job)
-        with self._cond:
-            self._result, self._busy = result, False
-            self._cond.notify_all()
+        self._thread.join(timeout)
 
     def _loop(self) -> None:
         while True:
@@ -351,7 +319,12 @@ class SolveWorker:
                     self._cond.wait()
                 if self._stopped:
                     return
-            self.run_pending()
+                job, self._job = self._job, None
+            assert job is not None
+            result = self._solve(job)
+            with self._cond:
+                self._result, self._busy = result, False
+                self._cond.notify_all()
 
 
 # ----------------------------------------------------------------------------- the controller
@@ -375,9 +348,7 @@ class ArmController:
         arm_id: str,
         planner: Planner,
         settings: ControlSettings | None = None,
-        wake: Callable[[], None] | None = None,
     ) -> None:
-        """``wake``: see :class:`SolveWorker` (None: the controller's own solve thread)."""
         self.cell = cell
         self.arm_id = arm_id
         self.robot = cell.arm(arm_id).robot
@@ -397,7 +368,7 @@ class ArmController:
         self._fallback_lock = threading.Lock()
         self._fallback: tuple[int, np.ndarray] | None = None  # (tick, fail-safe) of the latest job
         self._finished: dict[int, float] = {}  # tick → solve time of jobs finished lately
-        self._worker = SolveWorker(self._solve, name=f"solve_{arm_id}", wake=wake)
+        self._worker = SolveWorker(self._solve, name=f"solve_{arm_id}")
 
     def telemetry(self, decision: Decision) -> Telemetry:
         """The planner-status telemetry of ``decision`` (the planner's own when it ran)."""
@@ -530,10 +501,6 @@ class ArmController:
     def stop(self) -> None:
         """Stop the worker thread."""
         self._worker.stop()
-
-    def run_pending_solve(self) -> None:
-        """Run the submitted solve in the calling thread (with a ``wake`` callback)."""
-        self._worker.run_pending()
 
     def wait_idle(self, timeout: float) -> bool:
         """Wait up to ``timeout`` [s] for the solve in flight (lock-step runs); True if idle."""

@@ -3,7 +3,7 @@
 Every node's ``main()`` goes through :func:`run_main`: bad parameters, a malformed
 ``--ros-args`` section, a bad ``ROS_DOMAIN_ID`` (or a bad cell file, model, scenario ...) print
 ``<node>: error: <one line naming the parameter, rule and value>`` and exit with status 2.
-The node spins in a :class:`rclpy.executors.MultiThreadedExecutor`. SIGINT/SIGTERM stop the spin
+The node spins in a :class:`rclpy.executors.SingleThreadedExecutor`. SIGINT/SIGTERM stop the spin
 loop and call the node's ``on_stop`` while the middleware is still up (so a last command or the
 log's summary still goes out), then the node is destroyed and the context shut down.
 """
@@ -26,12 +26,7 @@ from typing import Any, Protocol
 import rclpy
 import rclpy.exceptions
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import (
-    Executor,
-    ExternalShutdownException,
-    MultiThreadedExecutor,
-    SingleThreadedExecutor,
-)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
@@ -190,7 +185,6 @@ def run_main(
     argv: Sequence[str] | None,
     drain_s: float = 0.0,
     usage: str | None = None,
-    threads: int = 1,
 ) -> int:
     """Init rclpy, build the node, spin until SIGINT/SIGTERM, stop cleanly.
 
@@ -226,9 +220,7 @@ def run_main(
         if threading.current_thread() is threading.main_thread():
             for signum in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(signum, on_signal)
-        executor: Executor = (
-            MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
-        )
+        executor = SingleThreadedExecutor()
         executor.add_node(node)
         settle_heap()
         try:
@@ -244,17 +236,6 @@ def run_main(
             executor.remove_node(node)
             executor.shutdown(timeout_sec=1.0)
             node.destroy_node()
-        if getattr(node, "hung", False):
-            # A callback that never returns (a hung solver) would keep the executor's worker
-            # thread, and with it the process, alive at interpreter exit.
-            print(
-                f"{program}: a callback is still running after the stop; exiting without it",
-                file=sys.stderr,
-                flush=True,
-            )
-            rclpy.try_shutdown()
-            sys.stdout.flush()
-            os._exit(0)
         return 0
     finally:
         rclpy.try_shutdown()
