@@ -195,7 +195,8 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
 
     def launch(name: str, module: str, params: dict[str, Any]) -> Process:
         argv = node_command(module, params, ["-r", f"__node:={name}"])
-        procs[name] = Process(name, argv, env, out / f"{name}.log", 0)
+        nice = SuiteSettings().recorder_nice if name == "recorder" else 0  # as orchestrate runs it
+        procs[name] = Process(name, argv, env, out / f"{name}.log", nice)
         return procs[name]
 
     memory: dict[str, list[tuple[float, float]]] = {}

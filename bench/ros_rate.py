@@ -104,7 +104,7 @@ def run(cell_name: str, model: str, seconds: float, out: Path) -> dict[str, Any]
             ),
             env,
             out / "recorder.log",
-            0,
+            settings.recorder_nice,
         )
         procs.append(recorder)
         if not recorder.wait_for("recording", 60):

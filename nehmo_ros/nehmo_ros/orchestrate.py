@@ -66,6 +66,9 @@ class SuiteSettings:
     startup_timeout: float = 60.0  # [s] for the recorder and the planners to come up
     stop_timeout: float = 10.0  # [s] after SIGINT before SIGKILL
     nice: int = 0  # added niceness of the children
+    #: Added niceness of the recorder on top of ``nice``: the planners and the bridge come first
+    #: when the CPUs are busy; the recorder's deep reader history absorbs its delays.
+    recorder_nice: int = 10
     extra_planner_args: tuple[str, ...] = ()
     env: dict[str, str] = field(default_factory=dict)
     #: A colcon install space (``ros_ws/install``): the nodes then run as its executables after
@@ -73,6 +76,8 @@ class SuiteSettings:
     install_space: str = ""
 
     def __post_init__(self) -> None:
+        if not 0 <= self.recorder_nice <= 19:
+            raise InvalidValueError("recorder_nice", "must lie in [0, 19]", self.recorder_nice)
         for name in ("time_limit", "physics_rate", "real_time_factor", "startup_timeout"):
             if not getattr(self, name) > 0:
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))
@@ -254,7 +259,8 @@ def run_episode(
         def launch(name: str, argv: list[str]) -> Process:
             commands[name] = argv
             (logs / "commands.json").write_text(json.dumps(commands, indent=1) + "\n")
-            procs.append(Process(name, argv, env, logs / f"{name}.log", settings.nice))
+            nice = settings.nice + (settings.recorder_nice if name == "recorder" else 0)
+            procs.append(Process(name, argv, env, logs / f"{name}.log", nice))
             return procs[-1]
 
         recorder = launch(
