@@ -1,4 +1,4 @@
-"""ROS 2 shells around `nehmo_core`: the per-arm planner node, the MCAP recorder and orchestration.
+"""ROS 2 (rclpy) shells around `nehmo_core`: the per-arm planner, the bag recorder, orchestration.
 
 The nodes stay thin: everything testable without a middleware lives in `nehmo_core`.
 """

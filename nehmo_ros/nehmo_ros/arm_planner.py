@@ -1,14 +1,16 @@
 """`arm_planner` node: plans one arm's joint velocities at a fixed rate with `nehmo_core`.
 
-    ros2 run nehmo_ros arm_planner --ros-args -p arm_id:=ur5_0 -p cell:=dual_ur5
+    install/nehmo_ros/lib/nehmo_ros/arm_planner --ros-args -p arm_id:=ur5_0 -p cell:=dual_ur5
 
-Topics (DESIGN.md § 5), ``<id>`` = ``arm_id``:
+(``ros2 run nehmo_ros arm_planner ...`` where the ROS 2 CLI is installed.) Topics, ``<id>`` =
+``arm_id``:
 
 - subscribes ``/<a>/joint_states`` of every arm ``a`` of the cell (sensor_msgs/JointState) and
   ``/<id>/goal`` (sensor_msgs/JointState, positions [rad] by joint name);
 - publishes ``/<id>/velocity_controller/commands`` (std_msgs/Float64MultiArray, [rad/s] in the
-  robot's joint order) every ``1/rate`` s from a timer, and ``/<id>/planner/status``
-  (diagnostic_msgs/DiagnosticStatus) after every command.
+  robot's joint order) every ``1/rate`` s from a timer, ``/<id>/planner/status``
+  (diagnostic_msgs/DiagnosticStatus) after every command, and the same status on
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once a second, at once when not OK.
 
 The solve runs in a worker thread (:class:`nehmo_ros.control.ArmController`): the command of
 tick k was planned from the observations of tick k−1; missed deadlines, solver failures and
