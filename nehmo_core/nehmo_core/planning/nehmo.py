@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError
+from nehmo_core.planning.fail_safe import MaximinFailSafe, maximin_command
 from nehmo_core.planning.interface import (
     PlanResult,
     Telemetry,
@@ -192,6 +193,7 @@ class NehmoPlanner:
         return project_step(t * u, rows, t * self.settings.u_max) / t
 
     def reset(self) -> None:
+        self._maximin = MaximinFailSafe(self.settings.fail_safe_band)
         self._last_current: tuple[object, _Peers] | None = None  # see _current
         # the last solution, the next solve's start; None: start at the naive step (at reset, and
         # after a fail-safe step, a corner of the box that says nothing about the next solution)
@@ -310,6 +312,12 @@ class NehmoPlanner:
         return self._within_self_clearance(self._hji_fail_safe(now), rows)
 
     def _hji_fail_safe(self, now: _Peers) -> np.ndarray:
+        s, n1 = self.settings, self.robot.dof
+        if s.fail_safe == "maximin" and len(now.ids) > 1:
+            chosen = self._maximin.critical(now.ids, now.values)
+            own = np.array([now.grads[i][:n1] for i in chosen])
+            peer = np.array([now.grads[i][n1:] for i in chosen])
+            return maximin_command(own, peer, s.u_max, s.d_max)
         critical = int(np.argmin(now.values))
         g = now.grads[critical][: self.robot.dof]
         u = self.settings.u_max * np.sign(g)
@@ -321,8 +329,10 @@ class NehmoPlanner:
 
     def fail_safe(self, q_self: ArrayLike, peers: Mapping[str, ArrayLike]) -> np.ndarray:
         """The fail-safe command (dof,) [rad/s] at this state: ``ū·sign(∂V/∂q¹)`` of the most
-        critical constrained peer (with self-clearance on, the nearest command that keeps the
-        arm's self-clearance rows); zero (hold) when no peer is constrained.
+        critical constrained peer, or with ``fail_safe="maximin"`` the command that keeps every
+        critical pair's worst-case V rate as high as possible (with self-clearance on, the
+        nearest command that keeps the arm's self-clearance rows); zero (hold) when no peer is
+        constrained.
 
         Cheap (one value-and-gradient evaluation); a ROS node computes it ahead of each solve
         so that a solve that overruns its tick still has a safe command to fall back on (a solve

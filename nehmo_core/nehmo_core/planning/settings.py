@@ -11,6 +11,7 @@ from nehmo_core.errors import InvalidValueError, UnknownNameError
 __all__ = ["PAPER_OPT", "SOLVERS", "PlannerSettings"]
 
 SOLVERS = ("sqp", "ipopt")
+FAIL_SAFES = ("single", "maximin")
 """``sqp``: the exact active-set SQP of :mod:`nehmo_core.planning.sqp` (fast);
 ``ipopt``: IPOPT through CasADi, the authors' setting (the reference)."""
 
@@ -45,6 +46,11 @@ class PlannerSettings:
     # fail-safe joints whose |∂V/∂q_j| is below this share of the largest stay still (0: every
     # joint at full speed, the paper's fail-safe)
     fail_safe_deadband: float = 0.0
+    # "single": the paper's ū·sign(∂V/∂q¹) of the most critical peer; "maximin": the command
+    # that maximizes the smallest worst-case V rate over every peer within fail_safe_band [m] of
+    # the smallest V (planning/fail_safe.py)
+    fail_safe: str = "single"
+    fail_safe_band: float = 0.05
     # self-collision velocity dampers on the step and the fail-safe (not in the paper's Opt):
     # link pairs closer than self_influence [m] may close at most self_gain of their distance
     # above self_safety [m] per planned step (planning/self_clearance.py)
@@ -104,6 +110,10 @@ class PlannerSettings:
             raise InvalidValueError(
                 "fail_safe_deadband", "must lie in [0, 1)", self.fail_safe_deadband
             )
+        if self.fail_safe not in FAIL_SAFES:
+            raise UnknownNameError("fail_safe", self.fail_safe, FAIL_SAFES)
+        if not self.fail_safe_band >= 0.0:
+            raise InvalidValueError("fail_safe_band", "must be >= 0 [m]", self.fail_safe_band)
         if not self.self_safety >= 0.0:
             raise InvalidValueError("self_safety", "must be >= 0", self.self_safety)
         if not self.self_influence > self.self_safety:

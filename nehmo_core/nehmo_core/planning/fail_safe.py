@@ -1,0 +1,91 @@
+"""The fail-safe against several critical peers at once.
+
+The paper's fail-safe ``ū·sign(∂V/∂q¹)`` follows one pair, the most critical. An arm between two
+peers whose values are close then switches between two opposite commands from one tick to the
+next and can be pushed into either peer. The *maximin* fail-safe takes every peer whose value is
+within ``band`` of the smallest and maximizes the smallest predicted rate of change of V under
+the worst-case peer motion:
+
+    max_{u, s} s   s.t.   g_iᵀu − d̄·‖h_i‖₁ ≥ s  for every critical peer i,   |u_j| ≤ ū,
+
+with ``g_i = ∂V_i/∂q_own`` and ``h_i = ∂V_i/∂q_peer`` (the peer's worst case ``−d̄·sign(h_i)``
+lowers V's rate by ``d̄‖h_i‖₁``, whatever the arm does). With one critical peer the answer is
+the paper's command. A small quadratic term on ``u`` (``ridge``) makes the solution unique:
+joints that do not change any critical V stay still instead of sweeping at full speed.
+Peers join the critical set within ``band`` of the smallest value and leave it only beyond
+``2·band``, so a command does not flip when two values cross (:class:`MaximinFailSafe`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from nehmo_core.planning.sqp import qp_step
+
+__all__ = ["MaximinFailSafe", "maximin_command", "worst_case_rates"]
+
+
+def worst_case_rates(
+    u: np.ndarray, own_grads: np.ndarray, peer_grads: np.ndarray, d_max: float
+) -> np.ndarray:
+    """Rate of change of each pair's V [m/s] under command ``u`` and the peers' worst case."""
+    return own_grads @ u - d_max * np.abs(peer_grads).sum(axis=1)
+
+
+def maximin_command(
+    own_grads: np.ndarray,
+    peer_grads: np.ndarray,
+    u_max: float,
+    d_max: float,
+    ridge: float = 1e-3,
+) -> np.ndarray:
+    """The box-bounded command maximizing the smallest worst-case V rate of the given pairs.
+
+    ``own_grads`` (k, n) and ``peer_grads`` (k, m) are the pairs' gradients of V. With one pair
+    it is ``ū·sign(g)`` (joints with a zero gradient stay still).
+    """
+    own_grads = np.atleast_2d(np.asarray(own_grads, dtype=np.float64))
+    peer_grads = np.atleast_2d(np.asarray(peer_grads, dtype=np.float64))
+    k, n = own_grads.shape
+    if k == 1:
+        return u_max * np.sign(own_grads[0])
+    offset = d_max * np.abs(peer_grads).sum(axis=1)
+    scale = float(np.abs(own_grads).max()) or 1.0  # the problem in units of the largest gradient
+    g = own_grads / scale
+    bound = float(np.abs(g).sum(axis=1).max()) * u_max + float(offset.max()) / scale + 1.0
+    # variables p = (u, s): min −s + ½·ridge·(‖u‖² + s²)  s.t.  g_i·u − s − offset_i/scale ≥ 0
+    hessian = ridge * np.eye(n + 1)
+    linear = np.zeros(n + 1)
+    linear[n] = -1.0
+    jac = np.hstack([g, -np.ones((k, 1))])
+    lo = np.concatenate([np.full(n, -u_max), [-bound]])
+    hi = np.concatenate([np.full(n, u_max), [bound]])
+    step = qp_step(hessian, linear, -offset / scale, jac, lo, hi)
+    if step.flag < 1 or not np.all(np.isfinite(step.p)):  # cannot happen for this QP; be safe
+        return u_max * np.sign(own_grads[int(np.argmax(-offset))])
+    return np.clip(step.p[:n], -u_max, u_max)
+
+
+class MaximinFailSafe:
+    """The maximin fail-safe with a critical set that holds its members (hysteresis)."""
+
+    def __init__(self, band: float) -> None:
+        self.band = band
+        self._critical: set[str] = set()
+
+    def reset(self) -> None:
+        self._critical = set()
+
+    def critical(self, ids: Sequence[str], values: np.ndarray) -> list[int]:
+        """Indices of the critical peers: within ``band`` of the smallest value, or within
+        ``2·band`` if critical at the last call."""
+        low = float(np.min(values))
+        chosen = [
+            i
+            for i, (p, v) in enumerate(zip(ids, values, strict=True))
+            if v <= low + self.band or (p in self._critical and v <= low + 2.0 * self.band)
+        ]
+        self._critical = {ids[i] for i in chosen}
+        return chosen
