@@ -92,7 +92,7 @@ def _sandwiched_states(planner: NehmoPlanner, seed: int, count: int) -> list[dic
         q = {a: rng.uniform(lo, hi) for a in CELL.arm_ids}
         now = planner._current(q["ur5_1"], {p: q[p] for p in PEERS})
         v = now.values
-        if not (0.02 < v.min() and v.max() < 0.25 and abs(v[0] - v[1]) < 0.05):
+        if not (v.min() > 0.02 and v.max() < 0.25 and abs(v[0] - v[1]) < 0.05):
             continue
         if float(now.grads[0][:6] @ now.grads[1][:6]) >= 0:
             continue
