@@ -124,7 +124,7 @@ class ArmPlannerNode(Node):
     It spins in a single-threaded executor; the solve runs in the controller's own thread
     (:class:`~nehmo_ros.control.SolveWorker`), so the 25 Hz timer never waits on it. (rclpy's
     multi-threaded executor with the solve in a callback group of its own put only 65-68 % of
-    the command periods within 40 ± 5 ms, against 96-99 % this way: ``bench/ros_rate.py``.)
+    the command periods within 40 ± 5 ms, against 96-100 % this way: ``bench/ros_rate.py``.)
     """
 
     def __init__(self) -> None:
