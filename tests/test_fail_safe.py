@@ -19,13 +19,16 @@ from nehmo_core.sim.cell_sim import CellSimulator
 U, D = 0.5, 0.5
 
 
-def _lp_optimum(own: np.ndarray, peer: np.ndarray) -> float:
-    """max_u min_i rate_i(u) over the box, by scipy's HiGHS (an independent solver)."""
+TAU = 0.1
+
+
+def _lp_optimum(own: np.ndarray, peer: np.ndarray, values: np.ndarray) -> float:
+    """max_u min_i (V_i + τ·rate_i(u)) over the box, by scipy's HiGHS (an independent solver)."""
     k, n = own.shape
     cost = np.zeros(n + 1)
     cost[n] = -1.0
-    rows = np.hstack([-own, np.ones((k, 1))])
-    limits = -D * np.abs(peer).sum(axis=1)
+    rows = np.hstack([-TAU * own, np.ones((k, 1))])
+    limits = values - TAU * D * np.abs(peer).sum(axis=1)
     res = linprog(cost, A_ub=rows, b_ub=limits, bounds=[(-U, U)] * n + [(None, None)])
     assert res.success
     return float(-res.fun)
@@ -37,12 +40,16 @@ def test_maximin_reaches_the_lp_optimum_and_beats_each_single_pair_command(seed:
     k = 2 + seed % 3
     own, peer = rng.normal(size=(k, 6)), 0.2 * rng.normal(size=(k, 6))
     own[1] = -own[0] + 0.2 * rng.normal(size=6)  # two peers on opposite sides
-    u = maximin_command(own, peer, U, D)
+    values = rng.uniform(0.0, 0.1, size=k)
+
+    def predicted(u: np.ndarray) -> float:
+        return float((values + TAU * worst_case_rates(u, own, peer, D)).min())
+
+    u = maximin_command(own, peer, U, D, values, TAU)
     assert np.all(np.abs(u) <= U + 1e-12)
-    best = worst_case_rates(u, own, peer, D).min()
-    assert best == pytest.approx(_lp_optimum(own, peer), abs=2e-3)
+    assert predicted(u) == pytest.approx(_lp_optimum(own, peer, values), abs=2e-4)
     for g in own:  # the paper's command for any one pair does no better on the worst pair
-        assert best >= worst_case_rates(U * np.sign(g), own, peer, D).min() - 1e-9
+        assert predicted(u) >= predicted(U * np.sign(g)) - 1e-9
 
 
 def test_with_one_pair_it_is_the_papers_command() -> None:

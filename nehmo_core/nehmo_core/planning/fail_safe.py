@@ -3,15 +3,18 @@
 The paper's fail-safe ``ū·sign(∂V/∂q¹)`` follows one pair, the most critical. An arm between two
 peers whose values are close then switches between two opposite commands from one tick to the
 next and can be pushed into either peer. The *maximin* fail-safe takes every peer whose value is
-within ``band`` of the smallest and maximizes the smallest predicted rate of change of V under
-the worst-case peer motion:
+within ``band`` of the smallest and maximizes the smallest value predicted ``τ`` ahead under the
+worst-case peer motion:
 
-    max_{u, s} s   s.t.   g_iᵀu − d̄·‖h_i‖₁ ≥ s  for every critical peer i,   |u_j| ≤ ū,
+    max_{u, s} s   s.t.   V_i + τ·(g_iᵀu − d̄·‖h_i‖₁) ≥ s  for every critical peer i,  |u_j| ≤ ū,
 
 with ``g_i = ∂V_i/∂q_own`` and ``h_i = ∂V_i/∂q_peer`` (the peer's worst case ``−d̄·sign(h_i)``
-lowers V's rate by ``d̄‖h_i‖₁``, whatever the arm does). With one critical peer the answer is
-the paper's command. A small quadratic term on ``u`` (``ridge``) makes the solution unique:
-joints that do not change any critical V stay still instead of sweeping at full speed.
+lowers V's rate by ``d̄‖h_i‖₁``, whatever the arm does). Maximizing the smallest *rate* instead
+(the same problem without ``V_i``) spent the whole command on a peer with slack: in five-UR5
+episodes it let a pair at V = 0.11 m close to contact while serving one at 0.15 m. With one
+critical peer the answer is the paper's command. A small quadratic term on ``u`` (``ridge``)
+makes the solution unique: joints that do not change any critical V stay still instead of
+sweeping at full speed.
 Peers join the critical set within ``band`` of the smallest value and leave it only beyond
 ``2·band``, so a command does not flip when two values cross (:class:`MaximinFailSafe`).
 """
@@ -39,11 +42,14 @@ def maximin_command(
     peer_grads: np.ndarray,
     u_max: float,
     d_max: float,
+    values: np.ndarray | None = None,
+    horizon: float = 0.1,
     ridge: float = 1e-3,
 ) -> np.ndarray:
-    """The box-bounded command maximizing the smallest worst-case V rate of the given pairs.
+    """The box-bounded command maximizing the smallest worst-case value ``horizon`` [s] ahead.
 
-    ``own_grads`` (k, n) and ``peer_grads`` (k, m) are the pairs' gradients of V. With one pair
+    ``own_grads`` (k, n) and ``peer_grads`` (k, m) are the pairs' gradients of V, ``values``
+    (k,) their values now (None: all equal, i.e. the smallest worst-case rate). With one pair
     it is ``ū·sign(g)`` (joints with a zero gradient stay still).
     """
     own_grads = np.atleast_2d(np.asarray(own_grads, dtype=np.float64))
@@ -52,9 +58,11 @@ def maximin_command(
     if k == 1:
         return u_max * np.sign(own_grads[0])
     offset = d_max * np.abs(peer_grads).sum(axis=1)
+    if values is not None:  # V_i + τ·rate_i ≥ s  ⇔  g_i·u − s/τ ≥ offset_i − V_i/τ
+        offset = offset - np.asarray(values, dtype=np.float64) / horizon
     scale = float(np.abs(own_grads).max()) or 1.0  # the problem in units of the largest gradient
     g = own_grads / scale
-    bound = float(np.abs(g).sum(axis=1).max()) * u_max + float(offset.max()) / scale + 1.0
+    bound = float(np.abs(g).sum(axis=1).max()) * u_max + float(np.abs(offset).max()) / scale + 1.0
     # variables p = (u, s): min −s + ½·ridge·(‖u‖² + s²)  s.t.  g_i·u − s − offset_i/scale ≥ 0
     hessian = ridge * np.eye(n + 1)
     linear = np.zeros(n + 1)

@@ -317,7 +317,8 @@ class NehmoPlanner:
             chosen = self._maximin.critical(now.ids, now.values)
             own = np.array([now.grads[i][:n1] for i in chosen])
             peer = np.array([now.grads[i][n1:] for i in chosen])
-            return maximin_command(own, peer, s.u_max, s.d_max)
+            values = now.values[chosen]
+            return maximin_command(own, peer, s.u_max, s.d_max, values, s.t_plan)
         critical = int(np.argmin(now.values))
         g = now.grads[critical][: self.robot.dof]
         u = self.settings.u_max * np.sign(g)
