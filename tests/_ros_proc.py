@@ -5,11 +5,9 @@ Modes
                        (JointState for ``*/joint_states``, Float64MultiArray for
                        ``*/commands``, DiagnosticArray for ``/diagnostics``) and print one JSON
                        line per message received
-  bag_writer PATH COUNTER  write JointStates to a bag forever, counting them in COUNTER
 """
 
 import json
-import os
 import sys
 import time
 
@@ -53,33 +51,10 @@ def run_listen(seconds: float, topics: list[str]) -> int:
     return 0
 
 
-def run_bag_writer(path: str, counter_path: str) -> None:
-    """Write JointStates forever; COUNTER always holds how many write() calls returned."""
-    from nehmo_core.logs import Header, JointState, LogWriter, Time, WriterSettings
-
-    fd = os.open(counter_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
-    writer = LogWriter(path, WriterSettings(flush_every=20, flush_interval_s=10.0))
-    writer.write_scenario({"arms": ["arm_a"], "seed": 1})
-    i = 0
-    while True:
-        msg = JointState(
-            header=Header(stamp=Time(sec=i // 1000, nanosec=(i % 1000) * 1_000_000)),
-            name=["j1", "j2"],
-            position=[0.001 * i, -0.001 * i],
-        )
-        writer.write("/arm_a/joint_states", msg, log_time_ns=1_000_000 * (i + 1))
-        i += 1
-        os.pwrite(fd, f"{i:12d}\n".encode(), 0)
-        if i % 200 == 0:
-            time.sleep(0.01)
-
-
 def main() -> int:
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "listen":
         return run_listen(float(args[0]), args[1:])
-    if mode == "bag_writer":
-        run_bag_writer(args[0], args[1])  # runs until killed
     raise SystemExit(f"unknown mode {mode!r}")
 
 

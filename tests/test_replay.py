@@ -30,19 +30,23 @@ def _bag(path: Path) -> Path:
     return path
 
 
+def _replay(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "nehmo_ros.orchestrate", "replay", *args],
+        env=child_env(),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
 def test_replay_republishes_every_message_in_order(tmp_path: Path) -> None:
     bag = _bag(tmp_path / "run")
     listener = start("listen", "60", TOPIC)
     try:
         assert listener.stdout is not None
         assert "listening" in listener.stdout.readline()
-        replay = subprocess.run(
-            [sys.executable, "-m", "nehmo_ros.orchestrate", "replay", str(bag), "--wait", "2"],
-            env=child_env(),
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
+        replay = _replay(str(bag), "--wait", "2")
     finally:
         listener.terminate()
         _, out, _ = finish(listener, timeout=20)
@@ -55,12 +59,6 @@ def test_replay_republishes_every_message_in_order(tmp_path: Path) -> None:
 
 def test_replay_rejects_topics_the_bag_lacks(tmp_path: Path) -> None:
     bag = _bag(tmp_path / "run")
-    proc = subprocess.run(
-        [sys.executable, "-m", "nehmo_ros.orchestrate", "replay", str(bag), "--topics", "/x"],
-        env=child_env(),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    proc = _replay(str(bag), "--topics", "/x")
     assert proc.returncode == 2, proc.stderr
     assert "`topics` must be topics of" in proc.stderr and "'/x'" in proc.stderr
