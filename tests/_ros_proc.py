@@ -1,10 +1,11 @@
 """Child processes of the ROS tests: ``python _ros_proc.py <mode> [options]``.
 
 Modes
-  listen SECONDS TOPIC...  a plain rclpy node (no nehmo code): subscribe to each TOPIC
+  listen SECONDS OUT TOPIC...  a plain rclpy node (no nehmo code): subscribe to each TOPIC
                        (JointState for ``*/joint_states``, Float64MultiArray for
-                       ``*/commands``, DiagnosticArray for ``/diagnostics``) and print one JSON
-                       line per message received
+                       ``*/commands``, DiagnosticArray for ``/diagnostics``) and append one
+                       JSON line per message received to the file OUT (a file, not a pipe: a
+                       pipe nobody reads fills up and stops the node); prints "listening"
 """
 
 import json
@@ -12,7 +13,7 @@ import sys
 import time
 
 
-def run_listen(seconds: float, topics: list[str]) -> int:
+def run_listen(seconds: float, out_path: str, topics: list[str]) -> int:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.node import Node
@@ -21,6 +22,7 @@ def run_listen(seconds: float, topics: list[str]) -> int:
 
     rclpy.init()
     node = Node("plain_listener")
+    out_file = open(out_path, "a")  # noqa: SIM115 (closed below)
 
     def printer(topic: str):  # type: ignore[no-untyped-def]
         def on_msg(msg) -> None:  # type: ignore[no-untyped-def]
@@ -31,7 +33,8 @@ def run_listen(seconds: float, topics: list[str]) -> int:
                 out.update(data=list(msg.data))
             else:
                 out.update(status=[s.name for s in msg.status])
-            print(json.dumps(out), flush=True)
+            out_file.write(json.dumps(out) + "\n")
+            out_file.flush()
 
         return on_msg
 
@@ -48,13 +51,14 @@ def run_listen(seconds: float, topics: list[str]) -> int:
         rclpy.spin_once(node, timeout_sec=0.05)
     node.destroy_node()
     rclpy.try_shutdown()
+    out_file.close()
     return 0
 
 
 def main() -> int:
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "listen":
-        return run_listen(float(args[0]), args[1:])
+        return run_listen(float(args[0]), args[1], args[2:])
     raise SystemExit(f"unknown mode {mode!r}")
 
 

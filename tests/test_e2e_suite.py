@@ -44,7 +44,8 @@ def scenario_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def suite(scenario_file: Path, colcon_install: Path) -> tuple[EpisodeRun, list[dict[str, Any]]]:
     """The orchestrated episode, and what the plain rclpy listener received."""
     topics = ["/ur5_0/joint_states", "/ur5_0/velocity_controller/commands", "/diagnostics"]
-    reader = start("listen", "150", *topics)
+    heard = scenario_file.parent / "listener.jsonl"
+    reader = start("listen", "300", str(heard), *topics)
     try:
         settings = SuiteSettings(
             planner="nehmo",
@@ -56,8 +57,10 @@ def suite(scenario_file: Path, colcon_install: Path) -> tuple[EpisodeRun, list[d
         )
         run = run_ros_episode(scenario_file, INDEX, scenario_file.parent, settings)
     finally:
-        _, out, _ = finish(reader, timeout=10)
-    received = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+        reader.terminate()
+        finish(reader, timeout=10)
+    lines = heard.read_text().splitlines() if heard.exists() else []
+    received = [json.loads(line) for line in lines if line.startswith("{")]
     return run, received
 
 
