@@ -74,7 +74,7 @@ LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: The diagnostics convention (diagnostic_aggregator, rqt_robot_monitor, Foxglove).
 DIAGNOSTICS_TOPIC = "/diagnostics"
 
-_PLANNER = PlannerSettings()
+_PLANNER, _CONTROL = PlannerSettings(), ControlSettings()
 PARAMS: dict[str, Param] = {
     "arm_id": Param("", "id of the arm this node commands (one of the cell's arms)"),
     "cell": Param("", "shipped cell name (dual_ur5, ...) or a cell YAML path"),
@@ -83,7 +83,7 @@ PARAMS: dict[str, Param] = {
         "nehmo | nehmo_paper | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless",
     ),
     "model": Param("shipped", "shipped | synthetic | [KIND=]PATH,... (run dir or .safetensors)"),
-    "rate": Param(25.0, "[Hz] command rate", 1e-3, 1000.0),
+    "rate": Param(_CONTROL.rate, "[Hz] command rate", 1e-3, 1000.0),
     "t_plan": Param(_PLANNER.t_plan, "[s] planning horizon (command hold time in Opt)"),
     "t_safe": Param(_PLANNER.t_safe, "[s] time-to-go at which V must stay >= epsilon"),
     "epsilon": Param(_PLANNER.epsilon, "[m] safety margin on V"),
@@ -93,9 +93,15 @@ PARAMS: dict[str, Param] = {
     "self_clearance": Param(_PLANNER.self_clearance, "self-collision rows in Opt and fail-safe"),
     "escape": Param(_PLANNER.escape, "stall escape and yield at the goal"),
     "deadline": Param(0.0, "[s] solve budget; 0: 75 % of the period", 0.0, 10.0),
-    "peer_timeout": Param(0.25, "[s] a joint state older than this is stale", 0.0, 60.0),
-    "stale_policy": Param("hold", "hold | fail_safe: what a stale or untrusted peer triggers"),
-    "jump_margin": Param(0.1, "[rad] slack of the test flagging states faster than d_max"),
+    "peer_timeout": Param(
+        _CONTROL.peer_timeout, "[s] a joint state older than this is stale", 0.0, 60.0
+    ),
+    "stale_policy": Param(
+        _CONTROL.stale_policy, "hold | fail_safe: what a stale or untrusted peer triggers"
+    ),
+    "jump_margin": Param(
+        _CONTROL.jump_margin, "[rad] slack of the test flagging states faster than d_max"
+    ),
     "allow_unmodelled": Param(False, "accept peers in reach that no pair model covers"),
     "fault_injection": Param("", "tests only: raise | solver_raise | hang | slow; '' = off"),
 }

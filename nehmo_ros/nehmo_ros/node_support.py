@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import gc
-import math
 import os
 import signal
 import sys
@@ -21,7 +20,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import rclpy
 import rclpy.exceptions
@@ -38,7 +37,6 @@ from nehmo_ros.oneline import one_line
 __all__ = [
     "NODE_ERRORS",
     "Param",
-    "StoppableNode",
     "declare_parameters",
     "load_cell_parameter",
     "one_line",
@@ -92,13 +90,6 @@ class Param:
         return d
 
 
-class StoppableNode(Protocol):
-    """A node with the hooks :func:`run_main` uses (an optional ``finished`` property ends the
-    spin loop as a signal does)."""
-
-    def on_stop(self) -> None: ...
-
-
 def declare_parameters(node: Node, params: Mapping[str, Param]) -> dict[str, Any]:
     """Declare every parameter with its descriptor and return the values in force.
 
@@ -131,13 +122,6 @@ def require_text(name: str, value: str, hint: str) -> str:
     if not isinstance(value, str) or not value.strip():
         raise InvalidValueError(name, f"is required ({hint})", value)
     return value.strip()
-
-
-def require_positive(name: str, value: float) -> float:
-    """``value`` if it is finite and > 0, else an error naming ``name``."""
-    if not (math.isfinite(float(value)) and float(value) > 0):
-        raise InvalidValueError(name, "must be > 0", value)
-    return float(value)
 
 
 def load_cell_parameter(value: str) -> Cell:

@@ -398,10 +398,9 @@ def replay(
     """
     import rclpy
     from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile
 
     from nehmo_core.logs import iter_log, summarize
-    from nehmo_ros.recorder import is_latched, message_class
+    from nehmo_ros.recorder import LATCHED, is_latched, message_class
 
     if not rate > 0:
         raise InvalidValueError("rate", "must be > 0", rate)
@@ -416,7 +415,6 @@ def replay(
         raise InvalidValueError("topics", f"must be topics of {path} {sorted(in_bag)}", unknown)
     rclpy.init(args=["orchestrate_replay"])
     node = Node("nehmo_replay")
-    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     pubs: dict[str, Any] = {}
     skipped = []
     for topic in wanted:
@@ -425,7 +423,7 @@ def replay(
         except (ImportError, AttributeError, ValueError):
             skipped.append(topic)
             continue
-        qos = latched if is_latched(topic) else 100
+        qos = LATCHED if is_latched(topic) else 100
         pubs[topic] = node.create_publisher(msg_class, topic, qos)
     if skipped:
         print(f"skipping topics of unknown types: {skipped}", file=sys.stderr)

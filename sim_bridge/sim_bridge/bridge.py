@@ -322,8 +322,8 @@ class SimBridgeNode(Node):
     def _joint_state(self, arm_id: str, q: np.ndarray, v: np.ndarray, t_ns: int) -> JointState:
         msg = JointState(
             name=list(self.cell.arm(arm_id).robot.joint_names),
-            position=[float(x) for x in q],
-            velocity=[float(x) for x in v],
+            position=q.tolist(),
+            velocity=v.tolist(),
         )
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(t_ns), 1_000_000_000)
         return msg
