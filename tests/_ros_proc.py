@@ -3,7 +3,8 @@
 Modes
   listen SECONDS OUT TOPIC...  a plain rclpy node (no nehmo code): subscribe to each TOPIC
                        (JointState for ``*/joint_states``, Float64MultiArray for
-                       ``*/commands``, DiagnosticArray for ``/diagnostics``) and append one
+                       ``*/commands``, Float64 for ``*/speed_bound``, DiagnosticArray for
+                       ``/diagnostics``) and append one
                        JSON line per message received to the file OUT (a file, not a pipe: a
                        pipe nobody reads fills up and stops the node); prints "listening"
 """
@@ -18,7 +19,7 @@ def run_listen(seconds: float, out_path: str, topics: list[str]) -> int:
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.node import Node
     from sensor_msgs.msg import JointState
-    from std_msgs.msg import Float64MultiArray
+    from std_msgs.msg import Float64, Float64MultiArray
 
     rclpy.init()
     node = Node("plain_listener")
@@ -31,6 +32,8 @@ def run_listen(seconds: float, out_path: str, topics: list[str]) -> int:
                 out.update(name=list(msg.name), position=list(msg.position))
             elif isinstance(msg, Float64MultiArray):
                 out.update(data=list(msg.data))
+            elif isinstance(msg, Float64):
+                out.update(data=msg.data)
             else:
                 out.update(status=[s.name for s in msg.status])
             out_file.write(json.dumps(out) + "\n")
@@ -43,6 +46,8 @@ def run_listen(seconds: float, out_path: str, topics: list[str]) -> int:
             node.create_subscription(JointState, topic, printer(topic), 100)  # reliable
         elif topic.endswith("commands"):
             node.create_subscription(Float64MultiArray, topic, printer(topic), 10)
+        elif topic.endswith("speed_bound"):
+            node.create_subscription(Float64, topic, printer(topic), 10)
         else:
             node.create_subscription(DiagnosticArray, topic, printer(topic), 10)
     print(json.dumps({"listening": topics}), flush=True)

@@ -43,7 +43,12 @@ def scenario_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def suite(scenario_file: Path, colcon_install: Path) -> tuple[EpisodeRun, list[dict[str, Any]]]:
     """The orchestrated episode, and what the plain rclpy listener received."""
-    topics = ["/ur5_0/joint_states", "/ur5_0/velocity_controller/commands", "/diagnostics"]
+    topics = [
+        "/ur5_0/joint_states",
+        "/ur5_0/velocity_controller/commands",
+        "/ur5_0/planner/speed_bound",
+        "/diagnostics",
+    ]
     heard = scenario_file.parent / "listener.jsonl"
     reader = start("listen", "300", str(heard), *topics)
     try:
@@ -147,3 +152,5 @@ def test_a_plain_rclpy_node_receives_states_commands_and_diagnostics(suite: Any)
     assert any(any(v != 0.0 for v in c["data"]) for c in commands)  # the arm was moved
     diagnostics = by_topic.get("/diagnostics", [])
     assert {"ur5_0/planner", "ur5_1/planner"} <= {n for d in diagnostics for n in d["status"]}
+    bounds = [b["data"] for b in by_topic.get("/ur5_0/planner/speed_bound", [])]
+    assert len(bounds) > 10 and all(0.0 <= b <= 1.0 for b in bounds)

@@ -121,7 +121,7 @@ def _episode(planner: NehmoPlanner, q0: dict, ticks: int = 25, dt: float = 0.04)
     for _ in range(ticks):
         q = sim.positions()
         now = planner._current(q["ur5_1"], {p: q[p] for p in PEERS})
-        u = planner._hji_fail_safe(now)
+        u = planner._hji_fail_safe(now, planner.settings.u_max)
         commands = {"ur5_1": u}
         for i, peer in enumerate(now.ids):
             commands[peer] = -D * np.sign(now.grads[i][6:])

@@ -629,3 +629,51 @@ def test_the_status_of_a_missed_deadline_reads_back_with_its_solve_times() -> No
         assert later["late_solve_tick"] == "0"
     finally:
         c.stop()
+
+
+class BoundPlanner(RecordingPlanner):
+    """Announces 0.2 and records the peer bounds it is given."""
+
+    announcement = 0.2
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.bounds: list[dict[str, float]] = []
+
+    def plan(  # type: ignore[override]
+        self, q_self: np.ndarray, peers: Mapping[str, np.ndarray], q_goal: np.ndarray, bounds=None
+    ) -> PlanResult:
+        self.bounds.append(dict(bounds or {}))
+        return super().plan(q_self, peers, q_goal)
+
+    def fail_safe(  # type: ignore[override]
+        self, q_self: np.ndarray, peers: Mapping[str, np.ndarray], bounds=None
+    ) -> np.ndarray:
+        return FAIL_SAFE.copy()
+
+
+def test_a_peers_announced_bound_reaches_the_planner_until_the_peer_moves_faster() -> None:
+    planner = BoundPlanner()
+    c = _controller(planner)
+    assert c.announcement == 0.2
+    for _ in range(3):
+        c.announce("ur5_1", 0.1)
+    q_peer = np.zeros(6)
+    for k in range(4):  # the peer moves at 0.1·d̄, stamped every 10 ms
+        q_peer[0] += 0.1 * 0.5 * 0.01
+        c.update_state("ur5_1", NAMES, list(q_peer), k * 0.01, (k + 1) * 10_000_000)
+    c.update_state("ur5_0", NAMES, [0.0] * 6, 0.04)
+    c.tick(0.04)
+    _wait_idle(c)
+    assert planner.bounds[-1] == {"ur5_1": 0.1}
+    q_peer[0] += 0.5 * 0.01  # full speed for 10 ms: breaks 0.1
+    c.update_state("ur5_1", NAMES, list(q_peer), 0.05, 50_000_000)
+    c.update_state("ur5_0", NAMES, [0.0] * 6, 0.08)
+    c.tick(0.08)
+    _wait_idle(c)
+    assert planner.bounds[-1] == {"ur5_1": 1.0}
+    with pytest.raises(InvalidValueError, match="speed bound"):
+        c.announce("ur5_1", -0.5)
+    with pytest.raises(InvalidValueError, match="arm_id"):
+        c.announce("ur5_0", 0.5)
+    c.stop()

@@ -434,7 +434,8 @@ def other(model) -> PairValueModel:
 
 
 def test_c_loop_evaluates_several_models_like_the_python_loop(model, other) -> None:
-    """Peers split between two pair models (two groups of rows, two generated functions)."""
+    """Peers split between two pair models (two groups of rows, two generated functions), each
+    group at its own time-to-go (as for a peer that keeps an announced speed bound)."""
     loop = native.loop()
     assert loop is not None and loop.model(model) is not None and loop.model(other) is not None
     optimal = 0
@@ -443,7 +444,9 @@ def test_c_loop_evaluates_several_models_like_the_python_loop(model, other) -> N
         groups = [(0, states[:2]), (1, states[2:])]
         split = replace(
             problem,
-            constraints=replace(problem.constraints, models=[model, other], groups=groups),
+            constraints=replace(
+                problem.constraints, models=[model, other], groups=groups, horizons=(0.3, 0.12)
+            ),
         )
         for screen in (None, 0.1):
             py = solve_sqp(split, np.zeros(6), screen=screen, native=False)

@@ -10,7 +10,10 @@
 - publishes ``/<id>/velocity_controller/commands`` (std_msgs/Float64MultiArray, [rad/s] in the
   robot's joint order) every ``1/rate`` s from a timer, ``/<id>/planner/status``
   (diagnostic_msgs/DiagnosticStatus) after every command, and the same status on
-  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once a second, at once when not OK.
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once a second, at once when not OK;
+- publishes ``/<id>/planner/speed_bound`` (std_msgs/Float64) with every command, the speed bound
+  the arm keeps (a share of ``u_max``; 1: none), and subscribes to every peer's: a peer that
+  keeps its bound is planned against it (:mod:`nehmo_core.planning.speed_bounds`).
 
 The solve runs in a worker thread (:class:`nehmo_ros.control.ArmController`): the command of
 tick k was planned from the observations of tick k−1; missed deadlines, solver failures and
@@ -51,12 +54,18 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.eval.telemetry import stamp, status_message
 from nehmo_core.logs import messages as log_msgs
-from nehmo_core.logs.topics import command_topic, goal_topic, joint_states_topic, status_topic
+from nehmo_core.logs.topics import (
+    command_topic,
+    goal_topic,
+    joint_states_topic,
+    speed_bound_topic,
+    status_topic,
+)
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_ros.control import ArmController, ControlSettings, Decision
 from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
@@ -92,6 +101,13 @@ PARAMS: dict[str, Param] = {
     "solver": Param(_PLANNER.solver, "sqp | ipopt"),
     "self_clearance": Param(_PLANNER.self_clearance, "self-collision rows in Opt and fail-safe"),
     "escape": Param(_PLANNER.escape, "stall escape and yield at the goal"),
+    "fail_safe": Param(_PLANNER.fail_safe, "single | maximin: the fail-safe against one or all"),
+    "hold_bound": Param(
+        _PLANNER.hold_bound, "speed bound announced at the goal, share of u_max (1: none)", 0.0, 1.0
+    ),
+    "hold_tolerance": Param(
+        _PLANNER.hold_tolerance, "[rad] goal distance within which hold_bound is announced"
+    ),
     "deadline": Param(0.0, "[s] solve budget; 0: 75 % of the period", 0.0, 10.0),
     "peer_timeout": Param(
         _CONTROL.peer_timeout, "[s] a joint state older than this is stale", 0.0, 60.0
@@ -167,6 +183,9 @@ class ArmPlannerNode(Node):
             deadline=deadline,
             self_clearance=bool(p["self_clearance"]),
             escape=bool(p["escape"]),
+            fail_safe=str(p["fail_safe"]),
+            hold_bound=float(p["hold_bound"]),
+            hold_tolerance=float(p["hold_tolerance"]),
         )
         planner = build_planner(
             p["planner"], self.cell, arm_id, p["model"], settings, bool(p["allow_unmodelled"])
@@ -195,6 +214,11 @@ class ArmPlannerNode(Node):
         self.command_pub = self.create_publisher(Float64MultiArray, command_topic(arm_id), HISTORY)
         self.status_pub = self.create_publisher(DiagnosticStatus, status_topic(arm_id), HISTORY)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, HISTORY)
+        self.bound_pub = self.create_publisher(Float64, speed_bound_topic(arm_id), HISTORY)
+        for other in self.controller.peer_ids:
+            self.create_subscription(
+                Float64, speed_bound_topic(other), self._bound_callback(other), HISTORY
+            )
         for other in self.cell.arm_ids:
             self.create_subscription(
                 JointState,
@@ -220,7 +244,7 @@ class ArmPlannerNode(Node):
         try:
             stamp = msg.header.stamp
             stamp_ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-            note = self.controller.states.update(arm_id, msg.name, msg.position, now, stamp_ns)
+            note = self.controller.update_state(arm_id, msg.name, msg.position, now, stamp_ns)
         except Exception as err:  # a malformed message never takes the node down
             note = f"rejected: {type(err).__name__}: {err}"
         if note is None:
@@ -237,6 +261,17 @@ class ArmPlannerNode(Node):
                 f"joint state of {arm_id} {note} ({self.controller.states.jumps[arm_id]} jumps)"
                 f"{untrusted}",
                 throttle_duration_sec=WARN_EVERY,
+            )
+
+    def _bound_callback(self, arm_id: str) -> Callable[[Any], None]:
+        return lambda msg: self._on_bound(arm_id, msg)
+
+    def _on_bound(self, arm_id: str, msg: Any) -> None:
+        try:
+            self.controller.announce(arm_id, float(msg.data))
+        except Exception as err:  # InvalidValueError: a bound outside [0, 1]
+            self.get_logger().warning(
+                f"speed bound of {arm_id} rejected: {err}", throttle_duration_sec=WARN_EVERY
             )
 
     def _on_goal(self, msg: Any) -> None:
@@ -276,6 +311,7 @@ class ArmPlannerNode(Node):
         command = Float64MultiArray(data=[float(u) for u in decision.velocity])
         self.command_pub.publish(command)
         self.published["commands"] += 1
+        self.bound_pub.publish(Float64(data=self.controller.announcement))
         period = math.nan if self._last_publish is None else now - self._last_publish
         self._last_publish = now
         status = self._status(decision, period, time.time_ns())

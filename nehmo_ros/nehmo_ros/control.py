@@ -20,6 +20,11 @@ Rules, in order of precedence, for the command of a tick:
 5. the solver failed, was infeasible or late inside ``plan`` → the planner's fail-safe;
 6. otherwise the planner's command.
 
+Peers' announced speed bounds (:mod:`nehmo_core.planning.speed_bounds`) reach the controller
+through :meth:`ArmController.announce`; each valid joint state is checked against them, and the
+planner plans every peer against the bound it still keeps. The arm's own announcement is
+:attr:`ArmController.announcement` (1 for planners that announce nothing).
+
 Every command, the fail-safe of rule 2 included, is clipped to ±``u_max``; one with a value that
 is not finite becomes a hold. A missed deadline reports no solve time (NaN: no solve finished in
 time); the abandoned solve's own time comes with the first command after it finished
@@ -42,11 +47,13 @@ import math
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any, cast
 
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.planning.interface import Planner, Telemetry
+from nehmo_core.planning.speed_bounds import FULL_SPEED, PeerBounds
 from nehmo_core.robots.model import Cell, RobotModel
 
 __all__ = [
@@ -369,6 +376,8 @@ class ArmController:
         self._fallback: tuple[int, np.ndarray] | None = None  # (tick, fail-safe) of the latest job
         self._finished: dict[int, float] = {}  # tick → solve time of jobs finished lately
         self._worker = SolveWorker(self._solve, name=f"solve_{arm_id}")
+        self._bounds = PeerBounds(s.d_max)
+        self._bounds_lock = threading.Lock()
 
     def telemetry(self, decision: Decision) -> Telemetry:
         """The planner-status telemetry of ``decision`` (the planner's own when it ran)."""
@@ -389,6 +398,42 @@ class ArmController:
     def goal(self) -> np.ndarray | None:
         with self._goal_lock:
             return self._goal
+
+    def update_state(
+        self,
+        arm_id: str,
+        names: Sequence[str],
+        position: Sequence[float],
+        now: float,
+        stamp_ns: int = 0,
+    ) -> str | None:
+        """:meth:`StateBuffer.update`; a stored peer state is also checked against the peer's
+        announced speed bound (timed by its header stamp when it has one)."""
+        note = self.states.update(arm_id, names, position, now, stamp_ns)
+        if arm_id != self.arm_id and (note is None or note.startswith("jumped")):
+            got = self.states.get(arm_id)
+            if got is not None:
+                t = stamp_ns / 1e9 if stamp_ns > 0 else now
+                with self._bounds_lock:
+                    self._bounds.observe(arm_id, t, got[0])
+        return note
+
+    def announce(self, arm_id: str, bound: float) -> None:
+        """Record a peer's announced speed bound (a fraction of ``d_max``, in [0, 1])."""
+        if arm_id not in self.peer_ids:
+            raise InvalidValueError("arm_id", f"must name a peer {list(self.peer_ids)}", arm_id)
+        with self._bounds_lock:
+            self._bounds.announce(arm_id, bound)
+
+    def peer_bounds(self) -> dict[str, float]:
+        """The bound each peer is planned against now (1: none, or it broke its word)."""
+        with self._bounds_lock:
+            return self._bounds.bounds(self.peer_ids)
+
+    @property
+    def announcement(self) -> float:
+        """The speed bound this arm announces (its planner's; 1 when it announces nothing)."""
+        return float(getattr(self.planner, "announcement", FULL_SPEED))
 
     def observe(self, now: float, stamp_ns: int = 0) -> Observation:
         """Snapshot of the buffers at ``now`` [s] (monotonic) for the current tick."""
@@ -538,10 +583,15 @@ class ArmController:
     def _hold(self, status: str) -> Decision:
         return Decision(_zeros(self.robot.dof), status, hold=True)
 
+    def _announces(self) -> bool:
+        return hasattr(self.planner, "announcement")
+
     def _fail_safe_velocity(self, q: np.ndarray, peers: Mapping[str, np.ndarray]) -> np.ndarray:
         fail_safe = getattr(self.planner, "fail_safe", None)
         if fail_safe is None:  # planners without a value function: holding still is their safe act
             return _zeros(self.robot.dof)
+        if self._announces():
+            return np.asarray(fail_safe(q, peers, self.peer_bounds()), dtype=np.float64)
         return np.asarray(fail_safe(q, peers), dtype=np.float64)
 
     def _decide(self, obs: Observation) -> Decision:
@@ -567,7 +617,11 @@ class ArmController:
             if self.settings.stale_policy == "hold":
                 return self._hold(status)
             return Decision(fallback, status, fail_safe=True)
-        result = self.planner.plan(obs.q_self, obs.peers, obs.goal)
+        if self._announces():
+            plan = cast(Any, self.planner).plan
+            result = plan(obs.q_self, obs.peers, obs.goal, self.peer_bounds())
+        else:
+            result = self.planner.plan(obs.q_self, obs.peers, obs.goal)
         t = result.telemetry
         return Decision(result.velocity, t.status, fail_safe=t.fail_safe, telemetry=t)
 

@@ -133,7 +133,7 @@ def run_fault_episode(
                     shown = fault.view(a, b, t, q[b])
                     if shown is not None:
                         names = cell.arm(b).robot.joint_names
-                        c.states.update(b, names, list(shown), t, k * period_ns)
+                        c.update_state(b, names, list(shown), t, k * period_ns)
             decisions = {a: c.tick(t, k * period_ns) for a, c in controllers.items()}
             for c in controllers.values():
                 if not c.wait_idle(60.0):

@@ -27,6 +27,8 @@ from nehmo_core.eval.setups import SUCCESS_NORMS, Setup
 from nehmo_core.eval.telemetry import status_message
 from nehmo_core.geometry.pybullet_world import Collision
 from nehmo_core.planning.interface import Planner
+from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.speed_bounds import PeerBounds
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenarios import Scenario
@@ -197,6 +199,13 @@ def _loop(
     hold = {a.arm_id: np.zeros(a.robot.dof) for a in cell.arms}
     rec.tick(0, sim.positions(), hold)
     pending: dict[str, np.ndarray] = {}
+    # announced speed bounds: heard one tick after they are made, checked against the motion
+    d_max = (
+        max(p.settings.d_max for p in planners.values() if isinstance(p, NehmoPlanner))
+        if any(isinstance(p, NehmoPlanner) for p in planners.values())
+        else 1.0
+    )
+    bounds = PeerBounds(d_max)
     outcome, ticks, collisions = "stuck", 0, []
     if reached(cell, sim.positions(), scenario, s):
         outcome = "success"
@@ -205,16 +214,28 @@ def _loop(
             observed = sim.positions()
             applied = {a: pending.get(a, hold[a]) for a in cell.arm_ids}
             planned = {}
+            for a in cell.arm_ids:
+                bounds.observe(a, k * dt, observed[a])
+            heard = bounds.bounds()
+            announced = {}
             for a in cell.arm_ids:  # the worker thread: plans from tick k, used in tick k + 1
-                result = planners[a].plan(observed[a], observed, scenario.goal[a])
+                planner = planners[a]
+                if isinstance(planner, NehmoPlanner):
+                    peer_bounds = {p: b for p, b in heard.items() if p != a}
+                    result = planner.plan(observed[a], observed, scenario.goal[a], peer_bounds)
+                else:
+                    result = planner.plan(observed[a], observed, scenario.goal[a])
                 planned[a] = np.array(result.velocity, dtype=np.float64)
                 t = result.telemetry
+                announced[a] = t.speed_bound
                 rec.plan_times[a].append(float(t.solve_time))
                 rec.statuses[a][t.status] += 1
                 rec.fail_safe[a] += int(t.fail_safe)
                 if rec.log is not None:
                     status = status_message(a, kinds[a], t, k * period_ns)
                     rec.log.plan(a, (k + 1) * period_ns, planned[a], status)
+            for a, b in announced.items():
+                bounds.announce(a, b)
             step = sim.step(applied, dt)
             pending = planned
             ticks = k + 1

@@ -58,6 +58,7 @@ def status_message(
         "peers_unmodelled": _ids(t.peers_unmodelled),
         "critical_peer": t.critical_peer or "",
         "escaping": "true" if t.escaping else "false",
+        "speed_bound": repr(float(t.speed_bound)),
     }
     return DiagnosticStatus(
         level=DiagnosticStatus.WARN if t.fail_safe else DiagnosticStatus.OK,
@@ -108,6 +109,7 @@ def telemetry_from_status(msg: DiagnosticStatus) -> StatusRecord:
         peers_unmodelled=_split(values.get("peers_unmodelled", "")),
         critical_peer=values.get("critical_peer") or None,
         escaping=values.get("escaping") == "true",
+        speed_bound=_float(values, "speed_bound") if "speed_bound" in values else 1.0,
     )
     return StatusRecord(
         msg.hardware_id, values["planner"], int(values["observation_ns"]), telemetry

@@ -50,6 +50,7 @@ from nehmo_core.logs.topics import (
     goal_topic,
     joint_states_topic,
     run_topics,
+    speed_bound_topic,
     status_topic,
     topic_type,
 )
@@ -103,6 +104,7 @@ __all__ = [
     "remove_bag",
     "run_topics",
     "serialize",
+    "speed_bound_topic",
     "status_topic",
     "summarize",
     "topic_type",

@@ -9,7 +9,11 @@ topic                                            type
 ``/<arm_id>/velocity_controller/commands``       std_msgs/msg/Float64MultiArray
 ``/<arm_id>/goal``                               sensor_msgs/msg/JointState
 ``/<arm_id>/planner/status``                     diagnostic_msgs/msg/DiagnosticStatus
+``/<arm_id>/planner/speed_bound``                std_msgs/msg/Float64
 ================================================ ==================================
+
+``planner/speed_bound`` is the speed bound the arm announces with each command, a fraction of
+its top speed (1: none; see :mod:`nehmo_core.planning.speed_bounds`).
 
 Run-wide: ``/clock`` (rosgraph_msgs/msg/Clock), ``/nehmo/collisions``
 (diagnostic_msgs/msg/DiagnosticArray, one status per colliding pair, published by the simulator)
@@ -32,6 +36,7 @@ STATUS_TYPE = "diagnostic_msgs/msg/DiagnosticStatus"
 COLLISIONS_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 SCENARIO_TYPE = "std_msgs/msg/String"
+SPEED_BOUND_TYPE = "std_msgs/msg/Float64"
 
 _ARM_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -41,6 +46,7 @@ _ARM_TOPICS: dict[str, str] = {
     "velocity_controller/commands": COMMAND_TYPE,
     "goal": JOINT_STATE_TYPE,
     "planner/status": STATUS_TYPE,
+    "planner/speed_bound": SPEED_BOUND_TYPE,
 }
 _RUN_TOPICS: dict[str, str] = {
     CLOCK_TOPIC: CLOCK_TYPE,
@@ -76,6 +82,11 @@ def goal_topic(arm_id: str) -> str:
 def status_topic(arm_id: str) -> str:
     """``/<arm_id>/planner/status``: planner telemetry."""
     return f"/{check_arm_id(arm_id)}/planner/status"
+
+
+def speed_bound_topic(arm_id: str) -> str:
+    """``/<arm_id>/planner/speed_bound``: the announced speed bound (a fraction of ū)."""
+    return f"/{check_arm_id(arm_id)}/planner/speed_bound"
 
 
 def arm_topics(arm_id: str) -> dict[str, str]:

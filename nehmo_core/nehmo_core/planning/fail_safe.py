@@ -31,7 +31,7 @@ __all__ = ["MaximinFailSafe", "maximin_command", "worst_case_rates"]
 
 
 def worst_case_rates(
-    u: np.ndarray, own_grads: np.ndarray, peer_grads: np.ndarray, d_max: float
+    u: np.ndarray, own_grads: np.ndarray, peer_grads: np.ndarray, d_max: float | np.ndarray
 ) -> np.ndarray:
     """Rate of change of each pair's V [m/s] under command ``u`` and the peers' worst case."""
     return own_grads @ u - d_max * np.abs(peer_grads).sum(axis=1)
@@ -41,7 +41,7 @@ def maximin_command(
     own_grads: np.ndarray,
     peer_grads: np.ndarray,
     u_max: float,
-    d_max: float,
+    d_max: float | np.ndarray,
     values: np.ndarray | None = None,
     horizon: float = 0.1,
     ridge: float = 1e-3,
@@ -49,7 +49,8 @@ def maximin_command(
     """The box-bounded command maximizing the smallest worst-case value ``horizon`` [s] ahead.
 
     ``own_grads`` (k, n) and ``peer_grads`` (k, m) are the pairs' gradients of V, ``values``
-    (k,) their values now (None: all equal, i.e. the smallest worst-case rate). With one pair
+    (k,) their values now (None: all equal, i.e. the smallest worst-case rate); ``d_max`` the
+    peers' speed bound, one for all or one per pair (k,). With one pair
     it is ``ū·sign(g)`` (joints with a zero gradient stay still).
     """
     own_grads = np.atleast_2d(np.asarray(own_grads, dtype=np.float64))

@@ -46,6 +46,7 @@ class Telemetry:
     peers_unmodelled: tuple[str, ...] = ()  # in reach but no pair model fits: NOT constrained
     critical_peer: str | None = None
     escaping: bool = False  # the step followed a stall-escape direction, not the goal
+    speed_bound: float = 1.0  # announced with this command: a fraction of ū it keeps (1: none)
 
 
 @dataclass(frozen=True)

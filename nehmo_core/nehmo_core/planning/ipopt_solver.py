@@ -45,10 +45,9 @@ class IpoptSolver:
     def _build(
         self,
         models: Sequence[PairValueModel],
-        layout: tuple[tuple[int, int], ...],
+        layout: tuple[tuple[int, int, float], ...],
         n1: int,
         t_plan: float,
-        t_safe: float,
         n_linear: int,
     ) -> ca.Function:
         u = ca.MX.sym("u", n1)
@@ -58,13 +57,13 @@ class IpoptSolver:
         if n_linear:  # self-clearance rows A·(t_plan·u) ≥ b; A enters as a parameter
             A = ca.MX.sym("A", n_linear, n1)
             params.append(ca.vec(A))
-        for index, count in layout:
+        for index, count, tau in layout:
             model = models[index]
             states = ca.MX.sym(f"x{index}", model.state_dim, count)
             params.append(ca.vec(states))
             step = ca.vertcat(t_plan * u, ca.DM.zeros(model.n2))
             for k in range(count):
-                g.append(model.value(t_safe, states[:, k] + step))
+                g.append(model.value(tau, states[:, k] + step))
         if n_linear:  # after the V rows, as in Constraints.evaluate
             g.append(ca.mtimes(A, t_plan * u))
         nlp: dict[str, Any] = {
@@ -88,17 +87,19 @@ class IpoptSolver:
         limited-memory approximation)."""
         cons = problem.constraints
         models = cons.models
-        layout = tuple((index, len(states)) for index, states in cons.groups)
+        layout = tuple(
+            (index, len(states), cons.horizon(g)) for g, (index, states) in enumerate(cons.groups)
+        )
         n1 = len(problem.error0)
         linear = cons.linear
         n_linear = linear.count if linear is not None else 0
-        key = (tuple(id(m) for m in models), layout, n1, problem.t_plan, cons.t_safe, n_linear)
+        key = (tuple(id(m) for m in models), layout, n1, problem.t_plan, n_linear)
         solver = self._solvers.get(key)
         if solver is None:
-            solver = self._build(models, layout, n1, problem.t_plan, cons.t_safe, n_linear)
+            solver = self._build(models, layout, n1, problem.t_plan, n_linear)
             self._solvers[key] = solver
         parts = [problem.error0]
-        lower = [np.full(sum(count for _, count in layout), cons.epsilon)]
+        lower = [np.full(sum(count for _, count, _ in layout), cons.epsilon)]
         if linear is not None and n_linear:
             parts.append(linear.A.T.ravel())  # column-major, as ca.vec
             lower.append(linear.b)

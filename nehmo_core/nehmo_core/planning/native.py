@@ -62,6 +62,7 @@ class _Group(ctypes.Structure):
         ("g", _P),
         ("arg", _P),
         ("res", _P),
+        ("tau", _D),
     ]
 
 
@@ -135,11 +136,11 @@ class NativeLoop:
         self.settings_at = ctypes.addressof(self.settings)
         self.iterate_fn = library.nehmo_sqp_iterate
         self.iterate_fn.restype = _I
-        self.iterate_fn.argtypes = [_I, _I, _P, _D, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
+        self.iterate_fn.argtypes = [_I, _I, _P, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
         self.iterate_fn.argtypes += [_I, _D, _D, _I, _D, _P, _P, _P, _P]
         self.solve_fn = library.nehmo_sqp_solve
         self.solve_fn.restype = _I
-        self.solve_fn.argtypes = [_I, _I, _P, _D, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
+        self.solve_fn.argtypes = [_I, _I, _P, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
         self.solve_fn.argtypes += [_P, _P, _D, _D, _D, _I, _D, _P, _P, _P, _P, _P, _P, _P]
         self.qp_fn = library.nehmo_qp_check
         self.qp_fn.restype = _I
@@ -211,7 +212,7 @@ class NativeLoop:
         alive: list[np.ndarray] = []  # arrays the C side reads, kept referenced with the structs
         m = 0
         prepared: _Prepared | None = None
-        for slot, (index, states) in zip(structs, groups, strict=False):
+        for g, (slot, (index, states)) in enumerate(zip(structs, groups, strict=False)):
             handle = self.model(models[index])
             if handle is None:
                 break
@@ -220,6 +221,7 @@ class NativeLoop:
             k, n_state = states.shape
             slot.fn, slot.n, slot.k, slot.states = handle.fn, n_state, k, states.ctypes.data
             slot.iw, slot.w, slot.x, slot.g, slot.arg, slot.res = handle.addresses
+            slot.tau = cons.horizon(g)
             m += k
         else:
             nlin, A, b = 0, None, None
@@ -230,7 +232,7 @@ class NativeLoop:
                 nlin = len(b)
             m += nlin
             if n <= MAX_N and m <= MAX_M:
-                fixed: tuple[object, ...] = (cons.t_safe, cons.epsilon, len(groups))
+                fixed: tuple[object, ...] = (cons.epsilon, len(groups))
                 fixed += (ctypes.addressof(structs), nlin)
                 fixed += (A.ctypes.data if A is not None else None,)
                 fixed += (b.ctypes.data if b is not None else None,)
@@ -325,13 +327,12 @@ class NativeLoop:
         io.J0[: m * n] = naive_values[1].reshape(-1)
         io.B0[: n * n] = B.reshape(-1)
         io.keep[:rows] = keep
-        tau, eps, ngroups, groups, nlin, A, b = prepared.fixed
+        eps, ngroups, groups, nlin, A, b = prepared.fixed
         code = self.solve_fn(
             n,
             rows,
             io.e0_at,
             problem.y_max,
-            tau,
             eps,
             ngroups,
             groups,

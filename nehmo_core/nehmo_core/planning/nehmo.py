@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import time
 import zlib
+from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -50,6 +51,7 @@ from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturba
 from nehmo_core.planning.pair_frame import PairMapping, arm_reach, match_pair
 from nehmo_core.planning.self_clearance import SelfClearance, SelfClearanceRows, project_step
 from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.speed_bounds import FULL_SPEED, check_bound
 from nehmo_core.planning.sqp import SolveResult, solve_sqp
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots.model import Cell
@@ -120,8 +122,16 @@ class _Peers:
     ids: list[str]
     model_index: list[int]
     states: list[np.ndarray]  # (n_i,) current pair state per peer
-    values: np.ndarray  # (k,) V(t_plan, x) [m]
+    values: np.ndarray  # (k,) V(b_i·t_plan, x) [m]
     grads: list[np.ndarray]  # (n_i,) ∇ₓV per peer
+    bounds: np.ndarray  # (k,) each peer's speed bound b_i, a fraction of d̄ (1: none)
+
+    def groups(self) -> list[tuple[int, float, list[int]]]:
+        """``(model index, bound, members)`` of the peers that share a model and a bound."""
+        keys = list(zip(self.model_index, self.bounds.tolist(), strict=True))
+        return [
+            (m, b, [i for i, key in enumerate(keys) if key == (m, b)]) for m, b in sorted(set(keys))
+        ]
 
 
 class NehmoPlanner:
@@ -194,6 +204,9 @@ class NehmoPlanner:
 
     def reset(self) -> None:
         self._maximin = MaximinFailSafe(self.settings.fail_safe_band)
+        # this arm's recent announcements (newest last); its commands keep the smallest
+        self._announced = deque([FULL_SPEED], maxlen=self.settings.bound_release_ticks + 1)
+        self._holding = False  # settled at the goal, announcing hold_bound
         self._last_current: tuple[object, _Peers] | None = None  # see _current
         # the last solution, the next solve's start; None: start at the naive step (at reset, and
         # after a fail-safe step, a corner of the box that says nothing about the next solution)
@@ -214,6 +227,40 @@ class NehmoPlanner:
         self._yielding = False  # the current escape gives way at the goal
         self._last_error = math.inf
         self._best_error = math.inf
+
+    # -- announced speed bound ---------------------------------------------------------------
+    def _announce(self, error0: np.ndarray) -> float:
+        """This command's announcement (a fraction of ū; see :mod:`.speed_bounds`): hold_bound
+        from within hold_tolerance of the goal until beyond twice that, else full speed."""
+        s = self.settings
+        if s.hold_bound < FULL_SPEED:
+            e = float(np.linalg.norm(error0))
+            if e <= s.hold_tolerance:
+                self._holding = True
+            elif e > 2.0 * s.hold_tolerance:
+                self._holding = False
+        announced = s.hold_bound if self._holding else FULL_SPEED
+        self._announced.append(announced)
+        return announced
+
+    @property
+    def announcement(self) -> float:
+        """The speed bound this arm announced with its latest command (a fraction of ū)."""
+        return self._announced[-1]
+
+    @property
+    def speed_cap(self) -> float:
+        """The fraction of ū this arm's commands keep: the smallest of its announcements of
+        the last ``bound_release_ticks`` commands and this one (a withdrawal is heard first)."""
+        return min(self._announced)
+
+    def _peer_bounds(self, peer_bounds: Mapping[str, float] | None) -> dict[str, float]:
+        """Each constrained peer's bound (1 unless given)."""
+        given = peer_bounds or {}
+        return {
+            p: check_bound(given[p], f"peer_bounds[{p!r}]") if p in given else FULL_SPEED
+            for p in self.pairs
+        }
 
     # -- stall escape -------------------------------------------------------------------------
     def _escape_error(self, now: _Peers) -> np.ndarray:
@@ -265,70 +312,96 @@ class NehmoPlanner:
 
     # -- one tick -----------------------------------------------------------------------------
     def _current(
-        self, q: np.ndarray, peers: Mapping[str, np.ndarray], only_known: bool = False
+        self,
+        q: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        bounds: Mapping[str, float] | None = None,
+        only_known: bool = False,
     ) -> _Peers:
-        """The constrained peers' pair states, ``V`` and ``∇V`` at ``τ = t_plan`` now. The last
-        answer is kept: a node asks for the fail-safe ahead of each solve from the same state,
-        and the solve then reuses its evaluation."""
+        """The constrained peers' pair states, ``V`` and ``∇V`` at ``τ = b·t_plan`` now (``b``
+        the peer's speed bound). The last answer is kept: a node asks for the fail-safe ahead of
+        each solve from the same state, and the solve then reuses its evaluation."""
         ids = [p for p in self.pairs if p in peers] if only_known else list(self.pairs)
-        key = (q.tobytes(), tuple((p, peers[p].tobytes()) for p in ids))
+        if bounds is None:
+            bounds = self._peer_bounds(None)
+        key = (q.tobytes(), tuple((p, peers[p].tobytes(), bounds[p]) for p in ids))
         if self._last_current is not None and self._last_current[0] == key:
             return self._last_current[1]
-        now = self._evaluate_current(q, peers, ids)
+        now = self._evaluate_current(q, peers, ids, bounds)
         self._last_current = (key, now)
         return now
 
     def _evaluate_current(
-        self, q: np.ndarray, peers: Mapping[str, np.ndarray], ids: list[str]
+        self,
+        q: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        ids: list[str],
+        bounds: Mapping[str, float],
     ) -> _Peers:
         index = [self.pairs[p].model_index for p in ids]
         states = [self.pairs[p].state(q, peers[p]) for p in ids]
         values = np.empty(len(ids))
         grads: list[np.ndarray] = [np.empty(0)] * len(ids)
-        for m in sorted(set(index)):
-            rows = [i for i, mi in enumerate(index) if mi == m]
+        now = _Peers(ids, index, states, values, grads, np.array([bounds[p] for p in ids]))
+        for m, b, rows in now.groups():
             v, g = self.models[m].evaluate(
-                self.settings.t_plan, np.array([states[i] for i in rows])
+                b * self.settings.t_plan, np.array([states[i] for i in rows])
             )
             for k, i in enumerate(rows):
                 values[i], grads[i] = v[k], g[k]
-        return _Peers(ids, index, states, values, grads)
+        return now
 
     def _problem(
-        self, error0: np.ndarray, now: _Peers, self_rows: SelfClearanceRows | None = None
+        self,
+        error0: np.ndarray,
+        now: _Peers,
+        self_rows: SelfClearanceRows | None = None,
+        cap: float = FULL_SPEED,
     ) -> OptProblem:
         s, n1 = self.settings, self.robot.dof
-        groups = []
-        for m in sorted(set(now.model_index)):
-            members = [i for i, mi in enumerate(now.model_index) if mi == m]
+        groups, horizons = [], []
+        for m, b, members in now.groups():
             predicted = np.array([now.states[i] for i in members])
             peer_grads = np.array([now.grads[i][n1:] for i in members])
-            predicted[:, n1:] += s.t_plan * worst_case_disturbance(peer_grads, s.d_max)
+            predicted[:, n1:] += s.t_plan * worst_case_disturbance(peer_grads, b * s.d_max)
             groups.append((m, predicted))
-        constraints = Constraints(self.models, groups, s.t_safe, s.epsilon, self_rows)
-        return OptProblem(error0, s.t_plan * s.u_max, s.t_plan, constraints)
+            horizons.append(b * s.t_safe)
+        constraints = Constraints(
+            self.models, groups, s.t_safe, s.epsilon, self_rows, tuple(horizons)
+        )
+        return OptProblem(error0, s.t_plan * s.u_max * cap, s.t_plan, constraints)
 
-    def _fail_safe(self, now: _Peers, rows: SelfClearanceRows | None = None) -> np.ndarray:
-        return self._within_self_clearance(self._hji_fail_safe(now), rows)
+    def _fail_safe(
+        self, now: _Peers, rows: SelfClearanceRows | None = None, cap: float = FULL_SPEED
+    ) -> np.ndarray:
+        return self._within_self_clearance(
+            self._hji_fail_safe(now, cap * self.settings.u_max), rows
+        )
 
-    def _hji_fail_safe(self, now: _Peers) -> np.ndarray:
+    def _hji_fail_safe(self, now: _Peers, u_max: float) -> np.ndarray:
         s, n1 = self.settings, self.robot.dof
         if s.fail_safe == "maximin" and len(now.ids) > 1:
             chosen = self._maximin.critical(now.ids, now.values)
             own = np.array([now.grads[i][:n1] for i in chosen])
             peer = np.array([now.grads[i][n1:] for i in chosen])
             values = now.values[chosen]
-            return maximin_command(own, peer, s.u_max, s.d_max, values, s.t_plan)
+            d_max = s.d_max * now.bounds[chosen]
+            return maximin_command(own, peer, u_max, d_max, values, s.t_plan)
         critical = int(np.argmin(now.values))
         g = now.grads[critical][: self.robot.dof]
-        u = self.settings.u_max * np.sign(g)
+        u = u_max * np.sign(g)
         if self.settings.fail_safe_deadband > 0.0:
             # joints that barely change V need not sweep at full speed (they cost V at most
             # ū·Σ|g_j| over the dead joints, and may fold the arm into itself)
             u[np.abs(g) < self.settings.fail_safe_deadband * np.abs(g).max()] = 0.0
         return u
 
-    def fail_safe(self, q_self: ArrayLike, peers: Mapping[str, ArrayLike]) -> np.ndarray:
+    def fail_safe(
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        peer_bounds: Mapping[str, float] | None = None,
+    ) -> np.ndarray:
         """The fail-safe command (dof,) [rad/s] at this state: ``ū·sign(∂V/∂q¹)`` of the most
         critical constrained peer, or with ``fail_safe="maximin"`` the command that keeps every
         critical pair's worst-case V rate as high as possible (with self-clearance on, the
@@ -339,16 +412,28 @@ class NehmoPlanner:
         so that a solve that overruns its tick still has a safe command to fall back on (a solve
         from the same state then reuses that evaluation).
         Peers missing from ``peers`` are left out (the caller decides what a missing peer means).
+        ``peer_bounds`` and the arm's own speed cap as in :meth:`plan`.
         """
         q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
         others = _peer_vectors(self.cell, self.arm_id, peers)
         if not any(p in others for p in self.pairs):
             return np.zeros(self.robot.dof)
-        return self._fail_safe(self._current(q, others, only_known=True), self._self_rows(q))
+        now = self._current(q, others, self._peer_bounds(peer_bounds), only_known=True)
+        return self._fail_safe(now, self._self_rows(q), self.speed_cap)
 
     def plan(
-        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        q_goal: ArrayLike,
+        peer_bounds: Mapping[str, float] | None = None,
     ) -> PlanResult:
+        """One tick: the command for ``q_self`` among ``peers`` toward ``q_goal``.
+
+        ``peer_bounds``: the speed bound (a fraction of d̄) each peer has announced and still
+        keeps (:class:`~nehmo_core.planning.speed_bounds.PeerBounds`); missing peers: 1. The
+        command's own announcement is ``telemetry.speed_bound``.
+        """
         start = time.perf_counter()
         deadline = start + self.settings.deadline
         q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
@@ -365,24 +450,25 @@ class NehmoPlanner:
             self._clear_stall()
             self._goal = goal.copy()
         error0 = goal_error(q, goal, self.robot, self.settings.wrap_goal)
+        bounds = self._peer_bounds(peer_bounds)
+        announced = self._announce(error0)
+        cap = self.speed_cap
         info: dict[str, Any] = {
             "peers_constrained": tuple(self.pairs),
             "peers_skipped": self.peers_skipped,
             "peers_unmodelled": self.peers_unmodelled,
+            "speed_bound": announced,
         }
         rows = self._self_rows(q)
         if not self.pairs:
-            y = np.clip(
-                -error0,
-                -self.settings.t_plan * self.settings.u_max,
-                self.settings.t_plan * self.settings.u_max,
-            )
+            y_max = self.settings.t_plan * self.settings.u_max * cap
+            y = np.clip(-error0, -y_max, y_max)
             u = self._within_self_clearance(y / self.settings.t_plan, rows)
             self._warm = u * self.settings.t_plan
             return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
-        now = self._current(q, others)
+        now = self._current(q, others, bounds)
         escaping = self.settings.escape and self._escape_left > 0
-        problem = self._problem(self._escape_error(now) if escaping else error0, now, rows)
+        problem = self._problem(self._escape_error(now) if escaping else error0, now, rows, cap)
         try:
             hessian = self._hessian if self.settings.sqp_warm_hessian else None
             y_start = problem.naive_step() if self._warm is None else self._warm
@@ -404,7 +490,7 @@ class NehmoPlanner:
             min_constraint = float(value_rows.min()) if len(value_rows) else math.nan
             fail_safe = False
         else:
-            u = self._fail_safe(now, rows)
+            u = self._fail_safe(now, rows, cap)
             self._warm = None
             min_constraint, fail_safe = math.nan, True
         if self.settings.escape:

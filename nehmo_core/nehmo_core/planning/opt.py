@@ -2,13 +2,15 @@
 
 In step variables ``y = t_plan·u`` [rad] (the own arm's displacement over the step)::
 
-    min_y ‖e₀ + y‖²   s.t.  V_i(t_safe, x_i + (y, 0)) ≥ ε  for every constrained peer i,
+    min_y ‖e₀ + y‖²   s.t.  V_i(τ_i, x_i + (y, 0)) ≥ ε  for every constrained peer i,
                             |y_j| ≤ t_plan·ū,
 
 plus, when enabled, the arm's self-clearance rows ``A·y ≥ b`` (linear, see
 :mod:`nehmo_core.planning.self_clearance`); ``e₀ = q¹ − q_goal`` (continuous joints optionally
 wrapped) and ``x_i`` is the pair state in model ``i``'s frame with the peer already moved by its
 worst case ``dⁱ = −d̄·sign(∂V/∂qⁱ)`` evaluated at ``τ = t_plan`` from the current state.
+``τ_i = t_safe`` unless the peer keeps an announced speed bound (see
+:mod:`nehmo_core.planning.speed_bounds`); each group of rows carries its own ``τ``.
 Solvers return ``u = y / t_plan``.
 """
 
@@ -41,6 +43,12 @@ class Constraints:
     t_safe: float
     epsilon: float
     linear: SelfClearanceRows | None = None  # self-clearance rows A·y ≥ b, after the V rows
+    # time-to-go [s] of each group's V rows; None: t_safe for every group
+    horizons: tuple[float, ...] | None = None
+
+    def horizon(self, group: int) -> float:
+        """The time-to-go [s] at which group ``group``'s V rows are evaluated."""
+        return self.t_safe if self.horizons is None else self.horizons[group]
 
     @cached_property
     def scratch(self) -> dict[object, object]:
@@ -69,13 +77,16 @@ class Constraints:
         return made
 
     def _subset(self, keep: np.ndarray) -> Constraints:
-        groups, start = [], 0
-        for index, states in self.groups:
+        groups, horizons, start = [], [], 0
+        for g, (index, states) in enumerate(self.groups):
             mine = keep[start : start + len(states)]
             start += len(states)
             if mine.any():
                 groups.append((index, states[mine]))
-        return replace(self, groups=groups)
+                horizons.append(self.horizon(g))
+        return replace(
+            self, groups=groups, horizons=None if self.horizons is None else tuple(horizons)
+        )
 
     def evaluate(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(c (m,), J (m, n1))``: ``c = V − ε`` and its gradient with respect to ``y``."""
@@ -83,8 +94,8 @@ class Constraints:
         c = np.empty(self.count)
         J = np.empty((len(c), n))
         k = 0
-        for index, states in self.groups:
-            v, g = self.models[index].evaluate(self.t_safe, states, own_step=y)
+        for group, (index, states) in enumerate(self.groups):
+            v, g = self.models[index].evaluate(self.horizon(group), states, own_step=y)
             np.subtract(v, self.epsilon, out=c[k : k + len(v)])
             J[k : k + len(v)] = g[:, :n]
             k += len(v)

@@ -15,7 +15,7 @@ FAIL_SAFES = ("single", "maximin")
 """``sqp``: the exact active-set SQP of :mod:`nehmo_core.planning.sqp` (fast);
 ``ipopt``: IPOPT through CasADi, the authors' setting (the reference)."""
 
-PAPER_OPT: dict[str, Any] = {"self_clearance": False, "escape": False}
+PAPER_OPT: dict[str, Any] = {"self_clearance": False, "escape": False, "hold_bound": 1.0}
 """What the paper's Opt leaves out of NeHMO's defaults (the ``paper`` preset, ``nehmo_paper``)."""
 
 _PRESETS: dict[str, dict[str, Any]] = {
@@ -51,6 +51,14 @@ class PlannerSettings:
     # the smallest V (planning/fail_safe.py)
     fail_safe: str = "single"
     fail_safe_band: float = 0.05
+    # announced speed bounds (not in the paper; planning/speed_bounds.py): an arm within
+    # hold_tolerance [rad] (L2) of its goal announces hold_bound (a fraction of ū) and keeps its
+    # commands within it until it leaves 2·hold_tolerance or gets a new goal, announcing the
+    # withdrawal bound_release_ticks commands ahead; peers that keep their announcement are
+    # planned against V(k·t_safe). hold_bound = 1: announce nothing (the paper)
+    hold_bound: float = 1.0
+    hold_tolerance: float = 0.05
+    bound_release_ticks: int = 2
     # self-collision velocity dampers on the step and the fail-safe (not in the paper's Opt):
     # link pairs closer than self_influence [m] may close at most self_gain of their distance
     # above self_safety [m] per planned step (planning/self_clearance.py)
@@ -112,6 +120,12 @@ class PlannerSettings:
             )
         if self.fail_safe not in FAIL_SAFES:
             raise UnknownNameError("fail_safe", self.fail_safe, FAIL_SAFES)
+        if not 0.0 <= self.hold_bound <= 1.0:
+            raise InvalidValueError(
+                "hold_bound", "must lie in [0, 1] (a fraction of ū)", self.hold_bound
+            )
+        if not self.hold_tolerance > 0.0:
+            raise InvalidValueError("hold_tolerance", "must be > 0 [rad]", self.hold_tolerance)
         if not self.fail_safe_band >= 0.0:
             raise InvalidValueError("fail_safe_band", "must be >= 0 [m]", self.fail_safe_band)
         if not self.self_safety >= 0.0:
@@ -127,7 +141,14 @@ class PlannerSettings:
                 raise InvalidValueError(name, "must be >= 0", getattr(self, name))
         if not self.reach_margin >= 0:
             raise InvalidValueError("reach_margin", "must be >= 0", self.reach_margin)
-        counts = ("sqp_max_iter", "ipopt_max_iter", "stall_ticks", "escape_ticks", "yield_ticks")
+        counts = (
+            "sqp_max_iter",
+            "ipopt_max_iter",
+            "stall_ticks",
+            "escape_ticks",
+            "yield_ticks",
+            "bound_release_ticks",
+        )
         for name in (*counts, "escape_seed"):
             value = getattr(self, name)
             low = 0 if name == "escape_seed" else 1

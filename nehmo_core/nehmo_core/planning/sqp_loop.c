@@ -48,6 +48,7 @@ typedef struct {
   double* g; /* (n,) scratch */
   const double** arg; /* sz_arg pointers (the function may use those past its inputs) */
   double** res;       /* sz_res pointers */
+  double tau;         /* time-to-go [s] at which this group's V rows are evaluated */
 } nehmo_group;
 
 enum { NEHMO_OPTIMAL = 0, NEHMO_INFEASIBLE = 1, NEHMO_ITERATION_LIMIT = 2, NEHMO_TIMEOUT = 3,
@@ -59,7 +60,7 @@ enum { NEHMO_OPTIMAL = 0, NEHMO_INFEASIBLE = 1, NEHMO_ITERATION_LIMIT = 2, NEHMO
 typedef struct {
   int n, m, ngroups, nlin;
   const double* error0;
-  double ymax, tau, eps;
+  double ymax, eps;
   nehmo_group* groups;
   const double* A; /* (nlin, n) */
   const double* b; /* (nlin,) */
@@ -83,7 +84,7 @@ static int nehmo_evaluate(const nehmo_problem* p, const double* y, double* c, do
       if (p->active && !p->active[index++]) continue;
       memcpy(grp->x, grp->states + (size_t)s * grp->n, sizeof(double) * grp->n);
       for (int j = 0; j < n; ++j) grp->x[j] += y[j];
-      grp->arg[0] = &p->tau;
+      grp->arg[0] = &grp->tau;
       grp->arg[1] = grp->x;
       grp->res[0] = &v;
       grp->res[1] = grp->g;
@@ -277,14 +278,14 @@ static int nehmo_iterate(const nehmo_problem* problem, double* y, double* B, dou
 }
 
 /* Returns a status (enum above); y, B, c (m,), J (m, n) hold the final iterate. */
-int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, double tau, double eps,
+int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, double eps,
                       int ngroups, nehmo_group* groups, int nlin, const double* A,
                       const double* b, double* y, double* B, double* c, double* J,
                       int evaluated, double tol,
                       double feasibility_tol, int max_iter, double deadline,
                       nehmo_daqp_quadprog quadprog, void* settings, int* iterations,
                       int* qp_flag) {
-  nehmo_problem prob = {n, m, ngroups, nlin, error0, ymax, tau, eps, groups, A, b, NULL};
+  nehmo_problem prob = {n, m, ngroups, nlin, error0, ymax, eps, groups, A, b, NULL};
   return nehmo_iterate(&prob, y, B, c, J, evaluated, tol, feasibility_tol, max_iter, deadline,
                        quadprog, settings, iterations, qp_flag);
 }
@@ -373,7 +374,7 @@ static int nehmo_same(const double* a, const double* b, int n) {
  * naive step (its rows' values c_naive, J_naive at hand) and from y = 0, each once unless tried.
  * keep: the V rows carried at first. Outputs: y, c (rows + nlin; NaN where not evaluated), B
  * (the Hessian estimate when optimal), iterations and the last QP flag. */
-int nehmo_sqp_solve(int n, int rows, const double* error0, double ymax, double tau, double eps,
+int nehmo_sqp_solve(int n, int rows, const double* error0, double ymax, double eps,
                     int ngroups, nehmo_group* groups, int nlin, const double* A,
                     const double* b, const double* y_start, const double* naive,
                     const double* c_naive, const double* J_naive, const double* B0,
@@ -381,7 +382,7 @@ int nehmo_sqp_solve(int n, int rows, const double* error0, double ymax, double t
                     double feasibility_tol, int max_iter, double deadline,
                     nehmo_daqp_quadprog quadprog, void* settings, double* y, double* c,
                     double* B, int* iterations, int* qp_flag) {
-  nehmo_solve_args a = {{n, rows + nlin, ngroups, nlin, error0, ymax, tau, eps, groups, A, b,
+  nehmo_solve_args a = {{n, rows + nlin, ngroups, nlin, error0, ymax, eps, groups, A, b,
                          NULL},
                         rows, tol, feasibility_tol, screen, deadline, quadprog, settings};
   const double zero[NEHMO_MAX_N] = {0.0};
