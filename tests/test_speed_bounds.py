@@ -88,7 +88,7 @@ def _pushing_states(planner: NehmoPlanner, bound: float, count: int) -> list[tup
         q2 = rng.uniform(-np.pi, np.pi, 6) * [1, 0.5, 0.6, 1, 1, 1]
         now = planner._current(q1, {PEER: q2}, {PEER: bound})
         full = planner._current(q1, {PEER: q2}, {PEER: 1.0})
-        if not (0.08 <= full.values[0] and now.values[0] <= 0.25):
+        if not (full.values[0] >= 0.08 and now.values[0] <= 0.25):
             continue
         sim.reset({OWN: q1, PEER: q2})
         if sim.collisions():
