@@ -6,7 +6,9 @@ solve started from the observations at tick ``k`` runs while the command planned
 at tick k − 1** (during tick 0 no command exists yet and the arms hold still). Each tick, the
 :class:`~nehmo_core.sim.cell_sim.CellSimulator` integrates the velocities and checks every arm
 pair and every arm's self-collision exactly at ``substeps`` instants (4 at 25 Hz: every 10 ms,
-the authors' spacing). The episode stops at the first collision, when every arm is within the
+the authors' spacing). Speed bounds announced by NeHMO planners with their commands (see
+:mod:`~nehmo_core.planning.speed_bounds`) are heard by the others at the next tick and checked
+against the observed motion. The episode stops at the first collision, when every arm is within the
 tolerance of its goal (checked at tick boundaries), or at the time limit.
 """
 
@@ -200,12 +202,8 @@ def _loop(
     rec.tick(0, sim.positions(), hold)
     pending: dict[str, np.ndarray] = {}
     # announced speed bounds: heard one tick after they are made, checked against the motion
-    d_max = (
-        max(p.settings.d_max for p in planners.values() if isinstance(p, NehmoPlanner))
-        if any(isinstance(p, NehmoPlanner) for p in planners.values())
-        else 1.0
-    )
-    bounds = PeerBounds(d_max)
+    nehmo = [p for p in planners.values() if isinstance(p, NehmoPlanner)]
+    bounds = PeerBounds(max((p.settings.d_max for p in nehmo), default=1.0))
     outcome, ticks, collisions = "stuck", 0, []
     if reached(cell, sim.positions(), scenario, s):
         outcome = "success"
