@@ -63,9 +63,6 @@ def test_an_arm_at_its_goal_announces_and_keeps_its_bound(models: list) -> None:
     q_own = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])  # both arms turned away: V ≈ 0.44 m
     far = {PEER: np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])}
     goal = q_own + 0.02
-    announced = [planner.plan(q_own, far, goal).telemetry.speed_bound for _ in range(13)]
-    # it settles after stall_ticks (12) calm plans
-    assert announced == [1.0] * 12 + [0.2]
     result = planner.plan(q_own, far, goal)
     assert result.telemetry.speed_bound == 0.2
     assert np.abs(result.velocity).max() <= 0.2 * 0.5 + 1e-12
@@ -136,19 +133,3 @@ def test_planning_against_an_announced_bound_is_safe_and_less_conservative(model
         collided, error = _run(planner, q1, q2, goal, bound, announce=False)
         untold.append(min(error, 10.0))
     assert np.mean(told) < np.mean(untold)
-
-
-def test_a_settled_arm_whose_peer_breaks_the_slow_game_withdraws_its_bound(models: list) -> None:
-    planner = NehmoPlanner(CELL, OWN, models, PlannerSettings(hold_bound=0.2))
-    q_own = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
-    far = {PEER: np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])}
-    for _ in range(13):
-        result = planner.plan(q_own, far, q_own)
-    assert result.telemetry.speed_bound == 0.2
-    close = {PEER: np.array([0.0, -1.2, 1.0, 0.0, 0.0, 0.0])}  # turned toward the arm: V < ε
-    result = planner.plan(q_own, close, q_own)
-    assert result.telemetry.fail_safe and np.abs(result.velocity).max() <= 0.1 + 1e-12
-    follow = [planner.plan(q_own, close, q_own) for _ in range(3)]
-    assert [r.telemetry.speed_bound for r in follow] == [1.0] * 3
-    assert np.abs(follow[0].velocity).max() <= 0.1 + 1e-12  # still within the old bound ...
-    assert np.abs(follow[2].velocity).max() == pytest.approx(0.5)  # ... then full speed

@@ -207,7 +207,6 @@ class NehmoPlanner:
         # this arm's recent announcements (newest last); its commands keep the smallest
         self._announced = deque([FULL_SPEED], maxlen=self.settings.bound_release_ticks + 1)
         self._holding = False  # settled at the goal, announcing hold_bound
-        self._calm = 0  # plans since the last fail-safe (a forced release waits for stall_ticks)
         self._last_current: tuple[object, _Peers] | None = None  # see _current
         # the last solution, the next solve's start; None: start at the naive step (at reset, and
         # after a fail-safe step, a corner of the box that says nothing about the next solution)
@@ -236,7 +235,7 @@ class NehmoPlanner:
         s = self.settings
         if s.hold_bound < FULL_SPEED:
             e = float(np.linalg.norm(error0))
-            if e <= s.hold_tolerance and self._calm >= s.stall_ticks:
+            if e <= s.hold_tolerance:
                 self._holding = True
             elif e > 2.0 * s.hold_tolerance:
                 self._holding = False
@@ -453,10 +452,6 @@ class NehmoPlanner:
         error0 = goal_error(q, goal, self.robot, self.settings.wrap_goal)
         bounds = self._peer_bounds(peer_bounds)
         announced = self._announce(error0)
-        if self._holding:
-            # a settled arm expects its peers to keep the slow game with it: a peer that breaks
-            # V(k·τ) ≥ ε is not cooperating, and the fail-safe that follows releases the hold
-            bounds = {p: min(b, announced) for p, b in bounds.items()}
         cap = self.speed_cap
         info: dict[str, Any] = {
             "peers_constrained": tuple(self.pairs),
@@ -498,9 +493,6 @@ class NehmoPlanner:
             u = self._fail_safe(now, rows, cap)
             self._warm = None
             min_constraint, fail_safe = math.nan, True
-        self._calm = 0 if fail_safe else self._calm + 1
-        if fail_safe and self._holding:
-            self._holding = False  # withdrawn with the next command; full speed release_ticks later
         if self.settings.escape:
             self._track_stall(error0, min_constraint < self.settings.stall_margin)
         telemetry = Telemetry(
