@@ -1,15 +1,17 @@
 """How many scenarios ask for goals that NeHMO's own safety margin forbids, and what became of them.
 
-    ./run python bench/goal_margins.py     # writes bench/results/goal_margins.{json,md}
+    ./run python bench/goal_margins.py --seeds 0,34,35   # bench/results/goal_margins.{json,md}
 
-For every scenario of the committed seed-0 sets, all arms are put at their goals and each arm's
-problem Opt is built there as the planner would (worst-case peer prediction over ``t_plan``,
-``V(t_safe, ·) ≥ ε``): the goal set is *inside the margin* when some arm's constraint is
-violated by the zero step. Such an episode can end with every arm at its goal only within the
-success tolerance, short of the exact goals, or by breaking the margin; most end stuck. The
-count is given for the default ``t_plan`` and for shorter planning horizons (the paper's remark
-that a faster solve allows a shorter adversarial horizon), and cross-tabulated with the outcomes
-of the ``nehmo`` rows in the committed tables.
+For every scenario of a set, all arms are put at their goals and each arm's problem Opt is
+built there as the planner would (worst-case peer prediction over ``t_plan``,
+``V(τ, ·) ≥ ε``): the goal set is *inside the margin* when some arm's constraint is violated by
+the zero step. Such an episode can end with every arm at its goal only within the success
+tolerance, short of the exact goals, or by breaking the margin; most end stuck. The count is
+given for the default ``t_plan`` and shorter planning horizons (peers at full speed, the paper's
+game), and for peers that announce the hold bound ``k`` (every arm settled: ``τ = k·t_safe``,
+:mod:`nehmo_core.planning.speed_bounds`; ``k = 0``: the goals' learned distance itself against
+ε). Seed 0 uses the committed tables (``bench/results/``), other seeds the fresh tables under
+``bench/results/fresh/seed<S>/``; the outcomes of their ``nehmo`` rows are cross-tabulated.
 """
 
 from __future__ import annotations
@@ -38,14 +40,18 @@ SETUPS = {  # setup → (table file, nehmo row)
     "ur5_kinova_challenging": ("table_IV_ur5_kinova_challenging.json", "nehmo/nehmo"),
 }
 T_PLANS = (0.1, 0.08, 0.04)
+BOUNDS = (PlannerSettings().hold_bound, 0.0)
 
 
-def goal_margin(planners: dict[str, NehmoPlanner], goal: dict[str, np.ndarray]) -> float:
-    """The smallest ``V − ε`` [m] of any arm's zero step with every arm at its goal."""
+def goal_margin(
+    planners: dict[str, NehmoPlanner], goal: dict[str, np.ndarray], bound: float = 1.0
+) -> float:
+    """The smallest ``V − ε`` [m] of any arm's zero step with every arm at its goal, each peer
+    planned against the speed bound ``bound`` (1: full speed)."""
     worst = np.inf
     for arm, planner in planners.items():
         peers = {a: q for a, q in goal.items() if a != arm}
-        now = planner._current(goal[arm], peers)
+        now = planner._current(goal[arm], peers, dict.fromkeys(planner.pairs, bound))
         if not now.ids:
             continue
         problem = planner._problem(np.zeros(planner.robot.dof), now)
@@ -54,68 +60,97 @@ def goal_margin(planners: dict[str, NehmoPlanner], goal: dict[str, np.ndarray]) 
     return worst
 
 
-def run() -> dict[str, Any]:
-    registry = ModelRegistry()
-    out: dict[str, Any] = {"machine": machine_at_end(), "setups": {}}
+def _where(seed: int) -> Path:
+    return RESULTS if seed == 0 else RESULTS / "fresh" / f"seed{seed}"
+
+
+def run_seed(seed: int, registry: ModelRegistry) -> dict[str, Any]:
+    out: dict[str, Any] = {}
     for setup_name, (table, row_name) in SETUPS.items():
         setup = get_setup(setup_name)
         cell = setup.load_cell()
-        scenarios = load_scenario_set(RESULTS / "scenarios" / f"{setup_name}_seed0.json")
+        scenario_file = _where(seed) / "scenarios" / f"{setup_name}_seed{seed}.json"
+        if not scenario_file.exists():
+            print(f"seed {seed}: no {scenario_file}, skipped")
+            continue
+        scenarios = load_scenario_set(scenario_file)
+        goals = [{a: np.asarray(q) for a, q in s.goal.items()} for s in scenarios.scenarios]
         models = registry.models_for("nehmo", cell)
         margins: dict[str, list[float]] = {}
         for t_plan in T_PLANS:
             settings = PlannerSettings(t_plan=t_plan)
             planners = {a: make_planner("nehmo", cell, a, models, settings) for a in cell.arm_ids}
-            margins[str(t_plan)] = [
-                goal_margin(planners, {a: np.asarray(q) for a, q in s.goal.items()})  # type: ignore[arg-type]
-                for s in scenarios.scenarios
-            ]
-        rows = json.loads((RESULTS / table).read_text())["rows"]
+            margins[str(t_plan)] = [goal_margin(planners, g) for g in goals]  # type: ignore[arg-type]
+        planners = {a: make_planner("nehmo", cell, a, models) for a in cell.arm_ids}
+        for bound in BOUNDS:
+            margins[f"k={bound:g}"] = [goal_margin(planners, g, bound) for g in goals]  # type: ignore[arg-type]
+        path = _where(seed) / table
+        rows = json.loads(path.read_text())["rows"] if path.exists() else []
         outcome = {
             e["scenario"]: e["outcome"] for r in rows if r["row"] == row_name for e in r["episodes"]
         }
-        default = margins[str(PlannerSettings().t_plan)]
+        settled = margins[f"k={BOUNDS[0]:g}"]
         cross = Counter(
             (outcome.get(i, "not run"), "inside" if m < 0 else "outside")
-            for i, m in zip(scenarios.indices, default, strict=True)
+            for i, m in zip(scenarios.indices, settled, strict=True)
         )
-        out["setups"][setup_name] = {
+        out[setup_name] = {
+            "seed": seed,
             "scenarios": len(scenarios.scenarios),
             "inside_margin": {k: int(np.sum(np.array(v) < 0)) for k, v in margins.items()},
             "outcomes_by_margin": {f"{o}/{m}": n for (o, m), n in sorted(cross.items())},
             "row": row_name,
         }
-        print(setup_name, json.dumps(out["setups"][setup_name]))
+        print(setup_name, json.dumps(out[setup_name]))
     return out
 
 
+def run(seeds: list[int]) -> dict[str, Any]:
+    registry = ModelRegistry()
+    report: dict[str, Any] = {"machine": machine_at_end(), "seeds": {}}
+    for seed in seeds:
+        report["seeds"][str(seed)] = run_seed(seed, registry)
+    return report
+
+
 def markdown(report: dict[str, Any]) -> str:
+    d = PlannerSettings()
     lines = [
         "# Goal sets inside NeHMO's safety margin",
         "",
         "A goal set is *inside the margin* when, with every arm at its goal, some arm's Opt "
-        "constraint `V(t_safe, ·) ≥ ε` (worst-case peer over `t_plan`) fails for the zero step: "
-        "no safe Opt planner can hold every arm exactly at its goal, so such an episode succeeds "
-        "only if the arms stop within the success tolerance short of the exact goals. "
-        "Seed-0 scenario sets, shipped models, default settings "
-        f"(ε = {PlannerSettings().epsilon}, t_safe = {PlannerSettings().t_safe}).",
+        "constraint fails for the zero step: no safe Opt planner can hold every arm exactly at "
+        "its goal, so such an episode succeeds only if the arms stop within the success "
+        "tolerance short of the exact goals. Shipped models, default settings "
+        f"(ε = {d.epsilon}, t_safe = {d.t_safe}). Columns: peers at full speed (the paper's "
+        f"game) for three `t_plan`; every peer settled and keeping the hold bound k "
+        f"(`V(k·t_safe) ≥ ε`; k = {BOUNDS[0]:g} is the default `hold_bound`; k = 0 compares the "
+        "goals' learned distance with ε). Outcomes: the `nehmo` row of the table of that seed "
+        f"(the run that produced it), against the margin at k = {BOUNDS[0]:g}.",
         "",
-        "| setup | scenarios | inside, t_plan = "
+        "| setup | seed | scenarios | inside, full speed, t_plan = "
         + " / ".join(f"{t:g}" for t in T_PLANS)
-        + " s | NeHMO outcome × margin (default t_plan) |",
-        "|---|---|---|---|",
+        + " s | inside, settled k = "
+        + " / ".join(f"{b:g}" for b in BOUNDS)
+        + " | NeHMO outcome × margin |",
+        "|---|---|---|---|---|---|",
     ]
-    for name, r in report["setups"].items():
-        inside = " / ".join(str(r["inside_margin"][str(t)]) for t in T_PLANS)
-        cross = ", ".join(f"{k}: {v}" for k, v in r["outcomes_by_margin"].items())
-        lines.append(f"| {name} | {r['scenarios']} | {inside} | {cross} |")
+    for seed, setups in report["seeds"].items():
+        for name, r in setups.items():
+            full = " / ".join(str(r["inside_margin"][str(t)]) for t in T_PLANS)
+            settled = " / ".join(str(r["inside_margin"][f"k={b:g}"]) for b in BOUNDS)
+            cross = ", ".join(f"{k}: {v}" for k, v in r["outcomes_by_margin"].items())
+            lines.append(f"| {name} | {seed} | {r['scenarios']} | {full} | {settled} | {cross} |")
     lines += ["", f"Machine: {report['machine']}.", ""]
     return "\n".join(lines)
 
 
 def main() -> None:
-    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
-    print(write_report(RESULTS, "goal_margins", run(), markdown))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", default="0", help="comma-separated scenario-set seeds")
+    args = parser.parse_args()
+    seeds = [int(s) for s in args.seeds.split(",") if s]
+    print(write_report(RESULTS, "goal_margins", run(seeds), markdown))
 
 
 if __name__ == "__main__":

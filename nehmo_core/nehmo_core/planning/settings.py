@@ -15,7 +15,12 @@ FAIL_SAFES = ("single", "maximin")
 """``sqp``: the exact active-set SQP of :mod:`nehmo_core.planning.sqp` (fast);
 ``ipopt``: IPOPT through CasADi, the authors' setting (the reference)."""
 
-PAPER_OPT: dict[str, Any] = {"self_clearance": False, "escape": False, "hold_bound": 1.0}
+PAPER_OPT: dict[str, Any] = {
+    "self_clearance": False,
+    "escape": False,
+    "fail_safe": "single",
+    "hold_bound": 1.0,
+}
 """What the paper's Opt leaves out of NeHMO's defaults (the ``paper`` preset, ``nehmo_paper``)."""
 
 _PRESETS: dict[str, dict[str, Any]] = {
@@ -49,14 +54,14 @@ class PlannerSettings:
     # "single": the paper's ū·sign(∂V/∂q¹) of the most critical peer; "maximin": the command
     # that maximizes the smallest worst-case V rate over every peer within fail_safe_band [m] of
     # the smallest V (planning/fail_safe.py)
-    fail_safe: str = "single"
+    fail_safe: str = "maximin"
     fail_safe_band: float = 0.05
     # announced speed bounds (not in the paper; planning/speed_bounds.py): an arm within
     # hold_tolerance [rad] (L2) of its goal announces hold_bound (a fraction of ū) and keeps its
     # commands within it until it leaves 2·hold_tolerance or gets a new goal, announcing the
     # withdrawal bound_release_ticks commands ahead; peers that keep their announcement are
     # planned against V(k·t_safe). hold_bound = 1: announce nothing (the paper)
-    hold_bound: float = 1.0
+    hold_bound: float = 0.2
     hold_tolerance: float = 0.05
     bound_release_ticks: int = 2
     # self-collision velocity dampers on the step and the fail-safe (not in the paper's Opt):
