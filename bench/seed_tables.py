@@ -1,0 +1,108 @@
+"""Tables II–IV over several scenario seeds, side by side, with the paper's numbers and the bars.
+
+    for s in 34 35; do OMP_NUM_THREADS=1 ./run python bench/evaluate_tables.py --seed $s \
+        --out bench/results/fresh/seed$s --skip-rows ROWS; done
+    ./run python bench/seed_tables.py --seeds 34,35     # bench/results/fresh/tables.md
+
+(``ROWS``: the rows left out, e.g. the slow centralized baselines.) Reads
+``table_<id>_<setup>.json`` of each seed's directory and writes one markdown table: per
+row, SR / CR / self / stuck [%] for each seed, the pooled numbers over all seeds, the paper's SR
+/ CR and, for the rows that have one, the target this implementation holds itself to.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from nehmo_core.eval.paper import TABLES
+
+FRESH = Path(__file__).resolve().parent / "results" / "fresh"
+
+#: (setup, row) → (min SR %, max CR between arms %): what the implementation aims for.
+TARGETS: dict[tuple[str, str], tuple[float, float]] = {
+    ("dual_ur5", "nehmo"): (95, 0),
+    ("triple_ur5", "nehmo"): (90, 0),
+    ("five_ur5", "nehmo"): (80, 0),
+    ("ur5_kinova_challenging", "nehmo/nehmo"): (84, 0),
+    ("ur5_kinova_challenging", "nehmo/reckless"): (0, 34),
+}
+
+
+def _cell(o: dict[str, Any]) -> str:
+    return (
+        f"{o['sr']:.0f} / {o['cr_inter_arm']:.0f} / {o['self_collision_rate']:.0f} / "
+        f"{o['stuck_rate']:.0f}"
+    )
+
+
+def _pooled(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    n = sum(r["episodes"] for r in rows)
+    share = {
+        "sr": sum(r["successes"] for r in rows),
+        "cr_inter_arm": sum(r["cr_inter_arm"] * r["episodes"] / 100 for r in rows),
+        "self_collision_rate": sum(r["self_collisions"] for r in rows),
+        "stuck_rate": sum(r["stuck"] for r in rows),
+    }
+    return {"episodes": n, **{k: 100.0 * v / n for k, v in share.items()}}
+
+
+def _met(target: tuple[float, float] | None, runs: list[dict[str, Any]]) -> str:
+    if target is None:
+        return ""
+    sr, cr = target
+    ok = all(r["sr"] >= sr and r["cr_inter_arm"] <= cr for r in runs)
+    text = f"SR ≥ {sr:g}, CR ≤ {cr:g}" if sr else f"CR ≤ {cr:g}"
+    return f"{text}: {'met' if ok else 'not met'}"
+
+
+def table(seeds: list[int]) -> str:
+    head = " | ".join(f"seed {s}" for s in seeds)
+    lines = [
+        "# Tables II–IV on fresh scenario seeds",
+        "",
+        f"Seeds {', '.join(map(str, seeds))}: scenario sets never used for tuning (the "
+        "development seed was 31, `../options/speed_bounds.md`). 100 episodes per row and seed, "
+        "`nehmo` with its defaults (maximin fail-safe, announced speed bounds), the baselines as "
+        "in `../table_II.md`. Cells: SR / CR between arms / self-collision / stuck [%]. A "
+        "target is met when every seed meets it.",
+        "",
+        f"| table | setup | row | {head} | pooled | paper SR / CR | target |",
+        "|---|---|---|" + "---|" * len(seeds) + "---|---|---|",
+    ]
+    for tid, setups in TABLES.items():
+        for setup, rows in setups:
+            files = [FRESH / f"seed{s}" / f"table_{tid}_{setup}.json" for s in seeds]
+            if not all(f.exists() for f in files):
+                continue
+            summaries = [json.loads(f.read_text()) for f in files]
+            for row in rows:
+                runs = [next((r for r in s["rows"] if r["row"] == row), None) for s in summaries]
+                if any(r is None for r in runs):
+                    continue
+                ours = [r["ours"] for r in runs]  # type: ignore[index]
+                paper = runs[0]["paper"]  # type: ignore[index]
+                paper_text = f"{paper['sr']:g} / {paper['cr']:g}" if paper else "–"
+                cells = " | ".join(_cell(o) for o in ours)
+                met = _met(TARGETS.get((setup, row)), ours)
+                lines.append(
+                    f"| {tid} | {setup} | {row} | {cells} | {_cell(_pooled(ours))} | "
+                    f"{paper_text} | {met} |"
+                )
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", default="34,35", help="comma-separated scenario seeds")
+    args = parser.parse_args()
+    seeds = [int(s) for s in args.seeds.split(",") if s]
+    out = FRESH / "tables.md"
+    out.write_text(table(seeds))
+    print(out.read_text())
+
+
+if __name__ == "__main__":
+    main()
