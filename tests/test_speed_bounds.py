@@ -133,3 +133,25 @@ def test_planning_against_an_announced_bound_is_safe_and_less_conservative(model
         collided, error = _run(planner, q1, q2, goal, bound, announce=False)
         untold.append(min(error, 10.0))
     assert np.mean(told) < np.mean(untold)
+
+
+def test_a_settled_arm_withdraws_its_bound_from_a_peer_that_breaks_the_slow_game(
+    models: list,
+) -> None:
+    """A peer that announces nothing and comes closer than a NeHMO peer planning against the
+    bound would (``V(k·t_plan) < ε``) is fled from at full speed after the withdrawal; the
+    same state from a peer that keeps a bound of its own is no reason to withdraw."""
+    settings = PlannerSettings(hold_bound=0.2)
+    q_own = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
+    far = {PEER: np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])}
+    close = {PEER: np.array([0.0, -1.2, 1.0, 0.0, 0.0, 0.0])}  # turned toward the arm: V < ε
+    for told, expected in (({PEER: 0.2}, 0.2), (None, 1.0)):
+        planner = NehmoPlanner(CELL, OWN, models, settings)
+        assert planner.plan(q_own, far, q_own).telemetry.speed_bound == 0.2
+        result = planner.plan(q_own, close, q_own, told)
+        assert result.telemetry.speed_bound == expected
+        assert np.abs(result.velocity).max() <= 0.1 + 1e-12  # this command keeps the old bound
+    follow = [planner.plan(q_own, close, q_own) for _ in range(3)]
+    assert [r.telemetry.speed_bound for r in follow] == [1.0] * 3
+    assert np.abs(follow[0].velocity).max() <= 0.1 + 1e-12
+    assert np.abs(follow[1].velocity).max() == pytest.approx(0.5)

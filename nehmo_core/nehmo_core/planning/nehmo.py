@@ -229,19 +229,34 @@ class NehmoPlanner:
         self._best_error = math.inf
 
     # -- announced speed bound ---------------------------------------------------------------
-    def _announce(self, error0: np.ndarray) -> float:
+    def _announce(self, error0: np.ndarray, threatened: bool = False) -> float:
         """This command's announcement (a fraction of ū; see :mod:`.speed_bounds`): hold_bound
-        from within hold_tolerance of the goal until beyond twice that, else full speed."""
+        from within hold_tolerance of the goal until beyond twice that, or until a peer breaks
+        the slow game (:meth:`_threatened`), else full speed."""
         s = self.settings
         if s.hold_bound < FULL_SPEED:
             e = float(np.linalg.norm(error0))
-            if e <= s.hold_tolerance:
-                self._holding = True
-            elif e > 2.0 * s.hold_tolerance:
+            if threatened or e > 2.0 * s.hold_tolerance:
                 self._holding = False
+            elif e <= s.hold_tolerance:
+                self._holding = True
         announced = s.hold_bound if self._holding else FULL_SPEED
         self._announced.append(announced)
         return announced
+
+    def _threatened(
+        self, q: np.ndarray, peers: Mapping[str, np.ndarray], bounds: Mapping[str, float]
+    ) -> bool:
+        """Whether a peer that announces nothing has broken the slow game with this arm near its
+        goal: ``V(k·t_plan, x) < ε`` with ``k = hold_bound``. A NeHMO peer plans against the
+        bound this arm announces and keeps ``V(k·t_safe) ≥ ε`` (so also at ``k·t_plan``); one
+        that does not (a reckless arm) is fled from at full speed, after the withdrawal."""
+        s = self.settings
+        ids = [p for p in self.pairs if bounds[p] >= FULL_SPEED]
+        if s.hold_bound >= FULL_SPEED or not ids:
+            return False
+        slow = self._evaluate_current(q, peers, ids, dict.fromkeys(ids, s.hold_bound))
+        return bool(slow.values.min() < s.epsilon)
 
     @property
     def announcement(self) -> float:
@@ -451,7 +466,9 @@ class NehmoPlanner:
             self._goal = goal.copy()
         error0 = goal_error(q, goal, self.robot, self.settings.wrap_goal)
         bounds = self._peer_bounds(peer_bounds)
-        announced = self._announce(error0)
+        near = float(np.linalg.norm(error0)) <= 2.0 * self.settings.hold_tolerance
+        threatened = near and self._threatened(q, others, bounds)
+        announced = self._announce(error0, threatened)
         cap = self.speed_cap
         info: dict[str, Any] = {
             "peers_constrained": tuple(self.pairs),

@@ -58,7 +58,8 @@ class PlannerSettings:
     fail_safe_band: float = 0.05
     # announced speed bounds (not in the paper; planning/speed_bounds.py): an arm within
     # hold_tolerance [rad] (L2) of its goal announces hold_bound (a fraction of ū) and keeps its
-    # commands within it until it leaves 2·hold_tolerance or gets a new goal, announcing the
+    # commands within it until it leaves 2·hold_tolerance, gets a new goal or a peer that announces
+    # nothing breaks V(hold_bound·t_plan) ≥ ε with it, announcing the
     # withdrawal bound_release_ticks commands ahead; peers that keep their announcement are
     # planned against V(k·t_safe). hold_bound = 1: announce nothing (the paper)
     hold_bound: float = 0.2

@@ -13,10 +13,13 @@ already trained (``V(0, x) = l(x)``: a peer that holds still is as far as it is)
 
 The promise is made by a NeHMO arm that has settled at its goal (:class:`NehmoPlanner` with
 ``hold_bound < 1``): it announces ``k = hold_bound`` with every command and keeps its own
-commands within ``k·ū`` from then on, including its fail-safe. That is the price: against a peer
-that announces nothing, a settled arm can move away only at ``k·ū``. A withdrawal (a new goal,
-or drifting beyond ``2·hold_tolerance``) is announced ``release_ticks`` commands before the arm
-moves faster, so peers hear it before it matters.
+commands within ``k·ū`` from then on, including its fail-safe. A withdrawal (a new goal,
+drifting beyond ``2·hold_tolerance``, or a threat) is announced ``release_ticks`` commands before
+the arm moves faster, so peers hear it before it matters. The threat: a NeHMO peer plans against
+the settled arm's bound and so keeps ``V(k·t_safe) ≥ ε`` with it; a peer that announces nothing
+and brings ``V(k·t_plan)`` below ε is not doing so (a reckless arm), and the settled arm
+withdraws to flee it at full speed. The price that remains: the two commands before the arm may
+speed up.
 
 :class:`PeerBounds` is the receiving side: it keeps each peer's announcement and checks the
 peer's observed motion against it; the tick a peer moves faster than it announced (with a
