@@ -346,8 +346,9 @@ def test_a_raising_solver_gets_the_fail_safe_and_is_counted(solver_run: tuple) -
     assert len(failed) >= 0.8 * len(after)
     assert all(s.level == DiagnosticStatus.ERROR for s in failed)
     assert all("Injected" in s.values["error"] for s in failed)
-    for s in failed:  # the fail-safe ū·sign(∂V/∂q) (or zero while it is unknown)
-        assert set(np.round(np.abs(s.command), 12)) <= {0.0, 0.5}
+    for s in failed:  # the fail-safe (maximin over the critical peers) within ±ū, never NaN
+        assert np.all(np.isfinite(s.command)) and np.abs(s.command).max() <= 0.5 + 1e-12
+    assert sum(bool(np.any(s.command)) for s in failed) >= 0.5 * len(failed)  # it does move
     last = after[-1].values
     assert int(last["solver_errors"]) >= len(failed)
     assert 1 <= len(_warnings(outputs["ur5_0"], "solver failed")) <= 5

@@ -21,6 +21,7 @@ from nehmo_core.logs import (
     Clock,
     DiagnosticArray,
     DiagnosticStatus,
+    Float64,
     Float64MultiArray,
     Header,
     JointState,
@@ -40,6 +41,7 @@ from nehmo_core.logs import (
     remove_bag,
     run_topics,
     serialize,
+    speed_bound_topic,
     status_topic,
     summarize,
     topic_type,
@@ -80,7 +82,8 @@ def write_run(path: Path, steps: int = 50, settings: WriterSettings | None = Non
                     ],
                 )
                 log.write(status_topic(arm), status, t_ns)
-                count += 3
+                log.write(speed_bound_topic(arm), Float64(data=1.0), t_ns)
+                count += 4
         hit = DiagnosticStatus(level=DiagnosticStatus.ERROR, name="ur5_0|ur5_1")
         log.write(COLLISIONS_TOPIC, DiagnosticArray(header=Header(stamp=stamp), status=[hit]), t_ns)
         count += 1

@@ -110,8 +110,9 @@ class FaultInjectingPlanner:
         self._release.set()
 
     def plan(
-        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
+        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike, *extra: Any
     ) -> PlanResult:
+        """The inner planner's plan (``extra``: e.g. the peers' speed bounds), after the fault."""
         call, self.calls = self.calls, self.calls + 1
         if call >= self.spec.after:
             self._active.set()
@@ -122,7 +123,7 @@ class FaultInjectingPlanner:
                 self._release.wait(None if math.isinf(self.spec.seconds) else self.spec.seconds)
             elif kind == "slow":
                 time.sleep(self.spec.seconds)
-        return self.inner.plan(q_self, peers, q_goal)
+        return self.inner.plan(q_self, peers, q_goal, *extra)
 
     def reset(self) -> None:
         self.inner.reset()

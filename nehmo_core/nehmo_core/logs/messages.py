@@ -34,6 +34,7 @@ __all__ = [
     "Clock",
     "DiagnosticArray",
     "DiagnosticStatus",
+    "Float64",
     "Float64MultiArray",
     "Header",
     "JointState",
@@ -256,6 +257,12 @@ class MultiArrayLayout(RosMessage):
     __msgtype__ = "std_msgs/msg/MultiArrayLayout"
 
 
+class Float64(RosMessage):
+    """std_msgs/msg/Float64: one number (``data``), e.g. an announced speed bound."""
+
+    __msgtype__ = "std_msgs/msg/Float64"
+
+
 class Float64MultiArray(RosMessage):
     """std_msgs/msg/Float64MultiArray: ros2_control's forward-command message (``data``)."""
 
@@ -305,6 +312,7 @@ MESSAGE_TYPES: dict[str, type[RosMessage]] = {
         JointState,
         MultiArrayDimension,
         MultiArrayLayout,
+        Float64,
         Float64MultiArray,
         String,
         Clock,
