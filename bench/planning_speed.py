@@ -23,7 +23,9 @@ on their own as well. Two planners side by side on the same scenarios: ``nehmo``
 settings: Opt plus the self-clearance rows, whose exact self-distances and Jacobians every step
 pays for, and the stall escape) and ``nehmo_paper`` (the paper's Opt). Two more rows isolate
 the solver: ``nehmo, Python SQP loop`` (the same SQP iterating in Python instead of C, same
-answers) and ``nehmo, tight SQP`` (``sqp_tol`` 1e-7 rad, no screening). Like the planner nodes,
+answers) and ``nehmo, tight SQP`` (``sqp_tol`` 1e-7 rad, no screening); ``nehmo, no speed
+bounds, single fail-safe`` is ``nehmo`` without the announced speed bounds and with the paper's
+fail-safe (what those two cost). Like the planner nodes,
 the bench freezes its long-lived objects out of the garbage collector before timing.
 ``planning_speed.png`` shows the step times of ``nehmo`` and ``nehmo_paper`` per cell as
 histograms, naive-safe and constrained steps stacked, with the median and p95 marked.
@@ -75,6 +77,7 @@ VARIANTS = {
     "nehmo": PlannerSettings(),
     "nehmo, Python SQP loop": PlannerSettings(sqp_native=False),
     "nehmo, tight SQP": PlannerSettings(sqp_tol=1e-7, sqp_screen=math.inf),
+    "nehmo, no speed bounds, single fail-safe": PlannerSettings(hold_bound=1.0, fail_safe="single"),
     "nehmo_paper": PlannerSettings.preset("paper"),
 }
 
