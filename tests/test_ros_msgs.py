@@ -54,6 +54,8 @@ def samples() -> list[Any]:
         M.JointState(header=_header(0, 0, "abc"), name=["j"], position=[], velocity=[1.5]),
         M.MultiArrayDimension(label="joints", size=6, stride=6),
         M.MultiArrayLayout(dim=[M.MultiArrayDimension(label="a", size=1, stride=2)], data_offset=1),
+        M.Float64(),
+        M.Float64(data=0.2),
         M.Float64MultiArray(),
         M.Float64MultiArray(
             layout=M.MultiArrayLayout(
