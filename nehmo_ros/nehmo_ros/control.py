@@ -586,12 +586,17 @@ class ArmController:
     def _announces(self) -> bool:
         return hasattr(self.planner, "announcement")
 
-    def _fail_safe_velocity(self, q: np.ndarray, peers: Mapping[str, np.ndarray]) -> np.ndarray:
+    def _fail_safe_velocity(
+        self,
+        q: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        bounds: Mapping[str, float] | None,
+    ) -> np.ndarray:
         fail_safe = getattr(self.planner, "fail_safe", None)
         if fail_safe is None:  # planners without a value function: holding still is their safe act
             return _zeros(self.robot.dof)
-        if self._announces():
-            return np.asarray(fail_safe(q, peers, self.peer_bounds()), dtype=np.float64)
+        if bounds is not None:
+            return np.asarray(fail_safe(q, peers, bounds), dtype=np.float64)
         return np.asarray(fail_safe(q, peers), dtype=np.float64)
 
     def _decide(self, obs: Observation) -> Decision:
@@ -604,12 +609,14 @@ class ArmController:
         if obs.missing:
             return self._hold("waiting_for_peers")
         doubtful = obs.stale or obs.untrusted
+        # the peers' bounds once per tick: the fail-safe and the solve then share one evaluation
+        bounds = self.peer_bounds() if self._announces() else None
         if doubtful and self.settings.stale_policy == "hold":
             # hold, and let a late solve of this tick fall back to holding too: never steer by
             # a stale or untrusted peer state
             fallback = _zeros(self.robot.dof)
         else:
-            fallback = self._fail_safe_velocity(obs.q_self, obs.peers)
+            fallback = self._fail_safe_velocity(obs.q_self, obs.peers, bounds)
         with self._fallback_lock:
             self._fallback = (obs.tick, fallback)
         if doubtful:
@@ -617,9 +624,9 @@ class ArmController:
             if self.settings.stale_policy == "hold":
                 return self._hold(status)
             return Decision(fallback, status, fail_safe=True)
-        if self._announces():
+        if bounds is not None:
             plan = cast(Any, self.planner).plan
-            result = plan(obs.q_self, obs.peers, obs.goal, self.peer_bounds())
+            result = plan(obs.q_self, obs.peers, obs.goal, bounds)
         else:
             result = self.planner.plan(obs.q_self, obs.peers, obs.goal)
         t = result.telemetry

@@ -31,6 +31,7 @@ import zlib
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, Protocol
 
 import numpy as np
@@ -126,6 +127,7 @@ class _Peers:
     grads: list[np.ndarray]  # (n_i,) ∇ₓV per peer
     bounds: np.ndarray  # (k,) each peer's speed bound b_i, a fraction of d̄ (1: none)
 
+    @cached_property
     def groups(self) -> list[tuple[int, float, list[int]]]:
         """``(model index, bound, members)`` of the peers that share a model and a bound."""
         keys = list(zip(self.model_index, self.bounds.tolist(), strict=True))
@@ -229,14 +231,20 @@ class NehmoPlanner:
         self._best_error = math.inf
 
     # -- announced speed bound ---------------------------------------------------------------
-    def _announce(self, error0: np.ndarray, threatened: bool = False) -> float:
+    def _announce(
+        self,
+        error0: np.ndarray,
+        q: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        bounds: Mapping[str, float],
+    ) -> float:
         """This command's announcement (a fraction of ū; see :mod:`.speed_bounds`): hold_bound
         from within hold_tolerance of the goal until beyond twice that, or until a peer breaks
         the slow game (:meth:`_threatened`), else full speed."""
         s = self.settings
         if s.hold_bound < FULL_SPEED:
             e = float(np.linalg.norm(error0))
-            if threatened or e > 2.0 * s.hold_tolerance:
+            if e > 2.0 * s.hold_tolerance or self._threatened(q, peers, bounds):
                 self._holding = False
             elif e <= s.hold_tolerance:
                 self._holding = True
@@ -253,7 +261,7 @@ class NehmoPlanner:
         that does not (a reckless arm) is fled from at full speed, after the withdrawal."""
         s = self.settings
         ids = [p for p in self.pairs if bounds[p] >= FULL_SPEED]
-        if s.hold_bound >= FULL_SPEED or not ids:
+        if not ids:
             return False
         slow = self._evaluate_current(q, peers, ids, dict.fromkeys(ids, s.hold_bound))
         return bool(slow.values.min() < s.epsilon)
@@ -358,7 +366,7 @@ class NehmoPlanner:
         values = np.empty(len(ids))
         grads: list[np.ndarray] = [np.empty(0)] * len(ids)
         now = _Peers(ids, index, states, values, grads, np.array([bounds[p] for p in ids]))
-        for m, b, rows in now.groups():
+        for m, b, rows in now.groups:
             v, g = self.models[m].evaluate(
                 b * self.settings.t_plan, np.array([states[i] for i in rows])
             )
@@ -375,7 +383,7 @@ class NehmoPlanner:
     ) -> OptProblem:
         s, n1 = self.settings, self.robot.dof
         groups, horizons = [], []
-        for m, b, members in now.groups():
+        for m, b, members in now.groups:
             predicted = np.array([now.states[i] for i in members])
             peer_grads = np.array([now.grads[i][n1:] for i in members])
             predicted[:, n1:] += s.t_plan * worst_case_disturbance(peer_grads, b * s.d_max)
@@ -466,9 +474,7 @@ class NehmoPlanner:
             self._goal = goal.copy()
         error0 = goal_error(q, goal, self.robot, self.settings.wrap_goal)
         bounds = self._peer_bounds(peer_bounds)
-        near = float(np.linalg.norm(error0)) <= 2.0 * self.settings.hold_tolerance
-        threatened = near and self._threatened(q, others, bounds)
-        announced = self._announce(error0, threatened)
+        announced = self._announce(error0, q, others, bounds)
         cap = self.speed_cap
         info: dict[str, Any] = {
             "peers_constrained": tuple(self.pairs),
