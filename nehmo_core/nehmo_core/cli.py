@@ -33,6 +33,12 @@ _COMMANDS: dict[str, tuple[str, str, str, str]] = {
         "run_train",
         "train a neural HJR value function (deepreach | bc | bc+sym)",
     ),
+    "verify": (
+        "nehmo_core.verify.cli",
+        "add_arguments",
+        "run",
+        "certify a value function's safe level set (scenario bound over HJI rollouts)",
+    ),
     "validate": (
         "nehmo_core.hjr.ground_truth",
         "add_validate_arguments",

@@ -1,0 +1,77 @@
+"""Certificates for every shipped value function (``nehmo verify``), recorded in their model cards.
+
+For each model, τ = t_plan (0.1 s) and t_safe (0.3 s), over two distributions: uniform over the
+joint box, and the pair states visited by the ``nehmo`` planner in evaluation episodes of
+development seed 31 (``--episodes-dir``; made by ``nehmo evaluate --planners nehmo --seed 31``
+for dual_ur5, five_ur5 and ur5_kinova_challenging, 20 episodes each). Writes one JSON + Markdown
+per certificate under ``bench/results/certificates/`` and a table ``certificates.md``.
+
+    OMP_NUM_THREADS=1 ./run python bench/certify_models.py --episodes-dir runs/episodes
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from nehmo_core.verify.report import certificates_table
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "bench" / "results" / "certificates"
+MODELS = [  # (pair, variant, episode setups whose logs hold its pair states)
+    ("ur5_ur5", "bc+sym", ("dual_ur5", "five_ur5")),
+    ("ur5_ur5_diag", "bc+sym", ("five_ur5",)),
+    ("ur5_ur5_opposite", "bc+sym", ("five_ur5",)),
+    ("ur5_kinova", "bc+sym", ("ur5_kinova_challenging",)),
+    ("kinova_ur5", "bc+sym", ("ur5_kinova_challenging",)),
+    ("ur5_ur5", "bc", ("dual_ur5", "five_ur5")),
+    ("ur5_ur5", "deepreach", ("dual_ur5", "five_ur5")),
+]
+TAUS = (0.3, 0.1)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes-dir", type=Path, required=True)
+    parser.add_argument("--samples", type=int, default=3000)
+    parser.add_argument("--only", help="comma-separated pair/variant names, e.g. ur5_ur5/bc+sym")
+    parser.add_argument("--report-only", action="store_true")
+    args = parser.parse_args()
+    OUT.mkdir(parents=True, exist_ok=True)
+    only = set(args.only.split(",")) if args.only else None
+    if not args.report_only:
+        for tau in TAUS:
+            for pair, variant, setups in MODELS:
+                if only and f"{pair}/{variant}" not in only:
+                    continue
+                logs = [a for s in setups for a in ("--logs", str(args.episodes_dir / s))]
+                for dist in ("visited", "uniform"):
+                    cmd = ["nehmo", "verify", "--model", pair, "--variant", variant]
+                    cmd += [
+                        "--tau",
+                        str(tau),
+                        "--distribution",
+                        dist,
+                        "--samples",
+                        str(args.samples),
+                    ]
+                    cmd += [*(logs if dist == "visited" else []), "--out", str(OUT), "--card"]
+                    print("$", " ".join(cmd), flush=True)
+                    subprocess.run(cmd, check=True)
+    certs = [json.loads(p.read_text()) for p in sorted(OUT.glob("*.json"))]
+    table = certificates_table(
+        sorted(certs, key=lambda c: (c["model"], c["tau"], c["distribution"]["name"]))
+    )
+    (OUT.parent / "certificates.md").write_text(
+        "# Certificates of the shipped value functions\n\n"
+        "α = 1 %, β = 1e-3; made by `bench/certify_models.py` (episode logs: seed 31).\n\n" + table
+    )
+    print(table)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

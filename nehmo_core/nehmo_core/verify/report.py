@@ -1,0 +1,64 @@
+"""Markdown for certificates: one certificate as a page, several as one table."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from nehmo_core.verify.certify import Certificate
+
+
+def certificate_markdown(cert: Certificate) -> str:
+    """One certificate: the claim, how it was earned, the search pool's bands."""
+    s = cert.settings
+    verdict = "certified" if cert.certified else "**not certified**"
+    lines = [
+        f"# Certificate: {cert.model}, τ = {cert.tau:g} s, {cert.distribution['name']} states",
+        "",
+        f"With confidence {cert.confidence:.4g}, a state drawn from the "
+        f"{cert.distribution['name']} distribution with `V(τ, x) ≥ δ = {cert.delta:.4f}` m "
+        "is driven into contact within τ by "
+        f"some adversary of the set with probability at most **ε = {cert.epsilon:.4%}** "
+        f"({cert.violations} violations in N = {cert.samples} fresh states; "
+        f"target α = {s['alpha']}: {verdict}). {cert.accepted_share:.1%} of the distribution "
+        "lies in that level set.",
+        "",
+        f"- distribution: {cert.distribution['what']}",
+        f"- adversaries: {', '.join(s['adversaries'])}; rollout step {s['dt']} s; seed {s['seed']}",
+        f"- search: {cert.search['states']} states with V ≥ 0, {cert.search['violations_at_0']} "
+        f"violations, δ found {cert.search['delta']:.4f} m",
+        f"- wall time: {cert.wall_time_s:.0f} s",
+        f"- command: `{cert.command}`",
+        "",
+        "| attempt δ [m] | violations | ε bound | in level set |",
+        "|---|---|---|---|",
+    ]
+    lines += [
+        f"| {a['delta']:.4f} | {a['violations']} | {a['epsilon']:.4%} | {a['accepted_share']:.1%} |"
+        for a in cert.attempts
+    ]
+    lines += ["", "Search pool by value band (descriptive, not certified):", ""]
+    lines += ["| V band [m] | states | violations |", "|---|---|---|"]
+    lines += [_band_row(b) for b in cert.search["bands"]]
+    return "\n".join(lines) + "\n"
+
+
+def _band_row(band: dict[str, Any]) -> str:
+    lo, hi = band["band"]
+    label = f"[{lo:g}, {hi:g})" if hi is not None else f"≥ {lo:g}"
+    return f"| {label} | {band['states']} | {band['violations']} |"
+
+
+def certificates_table(certs: Sequence[dict[str, Any]]) -> str:
+    """Several certificates (their JSON dicts) as one Markdown table."""
+    lines = [
+        "| model | τ [s] | distribution | δ [m] | N | violations | ε bound | certified | wall s |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for c in certs:
+        lines.append(
+            f"| {c['model']} | {c['tau']:g} | {c['distribution']['name']} | {c['delta']:.3f} | "
+            f"{c['samples']} | {c['violations']} | {c['epsilon']:.3%} | "
+            f"{'yes' if c['certified'] else 'no'} | {c['wall_time_s']:.0f} |"
+        )
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,66 @@
+"""The exact failure margin a rollout is judged by: true geometry, never the learned ``l``.
+
+For an arm pair it is the signed distance between the two arms' collision geometry in PyBullet
+(negative in penetration), posed in the pair's own cell; for the low-dimensional systems
+(Air3D, two planar 2-link arms) the analytic boundary ``l(x)`` is already exact.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from nehmo_core.geometry.distance_data import PAIRS, pair_cell
+from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
+
+ExactMargin = Callable[[np.ndarray, float], np.ndarray]
+"""``margin(x (B, n) [rad or m], cutoff [m]) -> (B,)`` [m]; values above ``cutoff`` may be
+reported as ``cutoff``."""
+
+
+class PairDistance:
+    """Exact signed distance [m] of a shipped arm pair, ``x = (q¹, q²)`` in the system's order."""
+
+    def __init__(self, system: ArmPairSystem) -> None:
+        name = system.name
+        swapped = name == "kinova_ur5"  # the UR5-Kinova cell seen from the Kinova's base
+        cell, a, b = pair_cell("ur5_kinova" if swapped else name)
+        self.arm_a, self.arm_b = (b, a) if swapped else (a, b)
+        self.n1 = system.n1
+        self.world = CellWorld(cell)
+
+    def __call__(self, x: np.ndarray, cutoff: float = 1.0) -> np.ndarray:
+        out = np.empty(x.shape[0])
+        for i, state in enumerate(np.asarray(x, dtype=np.float64)):
+            self.world.set_joint_positions(self.arm_a, state[: self.n1])
+            self.world.set_joint_positions(self.arm_b, state[self.n1 :])
+            out[i] = self.world.distance(self.arm_a, self.arm_b, cutoff)
+        return out
+
+    def close(self) -> None:
+        self.world.close()
+
+
+class AnalyticBoundary:
+    """``l(x)`` of a system whose boundary is exact geometry (Air3D, the two-link pair)."""
+
+    def __init__(self, system: HJISystem) -> None:
+        self.system = system
+
+    def __call__(self, x: np.ndarray, cutoff: float = np.inf) -> np.ndarray:
+        with torch.no_grad():
+            margin = self.system.boundary(torch.as_tensor(x, dtype=torch.float64))
+        return np.minimum(margin.numpy(), cutoff)
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+def exact_margin(system: HJISystem) -> PairDistance | AnalyticBoundary:
+    """The exact margin of a system: PyBullet for shipped arm pairs, ``l`` otherwise."""
+    if isinstance(system, ArmPairSystem) and (system.name in PAIRS or system.name == "kinova_ur5"):
+        return PairDistance(system)
+    return AnalyticBoundary(system)
