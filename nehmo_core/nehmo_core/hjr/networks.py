@@ -191,6 +191,7 @@ class ValueFunction:
         self.system = network.system
         self.variant = network.variant
         self.chunk_size = chunk_size
+        self.card: dict[str, Any] = {}  # the model card (set when loaded from a file)
 
     @property
     def dtype(self) -> torch.dtype:

@@ -186,6 +186,7 @@ class NehmoPlanner:
                 self.pairs[peer.arm_id] = mapping
         self.peers_skipped = tuple(skipped)
         self.peers_unmodelled = tuple(unmodelled)
+        self.epsilon_source = self._certify_epsilon()
         self.reset()
         s = self.settings
         self.self_clearance = (
@@ -193,6 +194,22 @@ class NehmoPlanner:
             if s.self_clearance
             else None
         )
+
+    def _certify_epsilon(self) -> str:
+        """Raise ε to the certified levels of the models in use; say where ε came from."""
+        s = self.settings
+        if not s.certified_epsilon:
+            return f"ε = {s.epsilon:g} m, fixed"
+        used = sorted({m.model_index for m in self.pairs.values()})
+        levels = {self.models[i].name: self.models[i].certified_level(s.t_safe) for i in used}
+        certified = {name: d for name, d in levels.items() if d is not None}
+        missing = sorted(name for name, d in levels.items() if d is None)
+        if certified and max(certified.values()) > s.epsilon:
+            self.settings = s.replace(epsilon=max(certified.values()))
+        parts = [f"ε = {self.settings.epsilon:.4g} m = max({s.epsilon:g}"]
+        parts += [f"δ {name} {d:.4g}" for name, d in sorted(certified.items())]
+        note = ", ".join(parts) + f") at t_safe {s.t_safe:g} s"
+        return note + (f"; no certificate: {', '.join(missing)}" if missing else "")
 
     def _self_rows(self, q: np.ndarray) -> SelfClearanceRows | None:
         return self.self_clearance.rows(q) if self.self_clearance is not None else None

@@ -20,6 +20,7 @@ PAPER_OPT: dict[str, Any] = {
     "escape": False,
     "fail_safe": "single",
     "hold_bound": 1.0,
+    "certified_epsilon": False,
 }
 """What the paper's Opt leaves out of NeHMO's defaults (the ``paper`` preset, ``nehmo_paper``)."""
 
@@ -40,6 +41,9 @@ class PlannerSettings:
     """
 
     epsilon: float = 0.05  # safety margin on V
+    # raise epsilon to the largest level δ certified at t_safe by the cards of the pair models the
+    # planner uses (``nehmo verify``); False keeps epsilon as given (the paper's fixed margin)
+    certified_epsilon: bool = True
     t_plan: float = 0.1  # planning horizon: the command is held this long
     t_safe: float = 0.3  # time-to-go at which V must stay ≥ epsilon after the step
     u_max: float = 0.5  # ū: own joint speed bound

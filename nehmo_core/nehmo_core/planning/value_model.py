@@ -44,6 +44,7 @@ class PairValueModel:
     value_grad: ca.Function
     backend: str = "vm"
     library: Path | None = None  # the generated library of ``value_grad`` (compiled backend)
+    certificates: tuple[dict[str, Any], ...] = ()  # from the model card (``nehmo verify``)
     _calls: dict[int, _BufferedCall] = field(default_factory=dict, repr=False)
 
     @property
@@ -88,7 +89,17 @@ class PairValueModel:
             value_grad=compiled.function,
             backend=compiled.backend,
             library=compiled.library,
+            certificates=tuple(value_function.card.get("certificates", ())),
         )
+
+    def certified_level(self, tau: float) -> float | None:
+        """The largest level ``δ`` [m] certified at time-to-go ``tau`` [s] (None: none there).
+
+        A certificate that missed its target still counts with the level it reached last, so a
+        planner never trusts the model below it.
+        """
+        found = [c["delta"] for c in self.certificates if abs(c["tau"] - tau) < 1e-6]
+        return max(found) if found else None
 
     def evaluate(
         self, tau: float, x: np.ndarray, own_step: np.ndarray | None = None
