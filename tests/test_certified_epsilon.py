@@ -51,7 +51,7 @@ def test_no_certificate_at_t_safe_is_said(model: PairValueModel) -> None:
     certified = dataclasses.replace(model, certificates=(_cert(0.3, 0.09),))
     planner = _planner(certified, t_safe=0.25)
     assert planner.settings.epsilon == pytest.approx(0.05)
-    assert "no certificate: certified_eps_test" in planner.epsilon_source
+    assert "no certificate at t_safe for: certified_eps_test" in planner.epsilon_source
 
 
 def test_paper_rows_keep_the_fixed_epsilon(model: PairValueModel) -> None:

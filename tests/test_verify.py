@@ -1,4 +1,4 @@
-"""nehmo verify: the scenario bound, bad input, and certified level sets against a grid ground truth."""
+"""nehmo verify: the scenario bound, bad input, certified level sets against a grid ground truth."""
 
 from __future__ import annotations
 

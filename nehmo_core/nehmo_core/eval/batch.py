@@ -28,6 +28,7 @@ from nehmo_core.eval.planners import (
 from nehmo_core.eval.setups import OPT_KINDS, get_setup, is_centralized, parse_row, row_slug
 from nehmo_core.logs import remove_bag
 from nehmo_core.planning.interface import Planner
+from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
@@ -75,6 +76,7 @@ class RowRun:
     episode_seconds: list[float]
     value_models: dict[str, Any]
     unmodelled_peers: dict[str, list[str]]  # per Opt arm: peers in reach it does not constrain
+    epsilon: dict[str, str] = field(default_factory=dict)  # per Opt arm: its ε and whence
 
 
 # -- worker side ---------------------------------------------------------------------------------
@@ -126,12 +128,14 @@ def _run_job(config: BatchConfig, job: _Job) -> tuple[int, EpisodeResult, float,
     )
     models = {k: registry.described.get(k, []) for k in set(kinds.values()) if k in OPT_KINDS}
     unmodelled = unmodelled_peers(planners)
+    epsilon = {a: p.epsilon_source for a, p in planners.items() if isinstance(p, NehmoPlanner)}
     metadata = {
         "setup": setup.name,
         "row": job.row,
         "scenario_set": {"seed": job.set_seed, "index": job.index, "position": job.position},
         "value_models": models,
         "unmodelled_peers": unmodelled,
+        "epsilon": epsilon,
         "planner_settings": config.planner_settings.to_dict(),
     }
     remove_bag(job.log_path)  # an earlier run's bag of this episode
@@ -146,7 +150,7 @@ def _run_job(config: BatchConfig, job: _Job) -> tuple[int, EpisodeResult, float,
         log_path=job.log_path,
         metadata=metadata,
     )
-    used = {"value_models": models, "unmodelled_peers": unmodelled}
+    used = {"value_models": models, "unmodelled_peers": unmodelled, "epsilon": epsilon}
     return job.position, result, time.perf_counter() - start, used
 
 
@@ -192,6 +196,7 @@ def run_rows(
             seconds: dict[int, float] = {}
             models: dict[str, Any] = {}
             unmodelled: dict[str, list[str]] = {}
+            epsilon: dict[str, str] = {}
             with tqdm(total=len(jobs), desc=f"{config.setup} {row}", disable=not progress) as bar:
                 if executor is None:
                     outputs: Any = (_run_job(config, job) for job in jobs)
@@ -202,6 +207,7 @@ def run_rows(
                     memory[position], seconds[position] = result, wall
                     models.update(used["value_models"])
                     unmodelled.update(used["unmodelled_peers"])
+                    epsilon.update(used["epsilon"])
                     bar.update(1)
                     bar.set_postfix_str(_postfix(memory.values()))
             logs = [job.log_path for job in jobs]
@@ -218,6 +224,7 @@ def run_rows(
                 episode_seconds=[seconds[k] for k in range(len(jobs))],
                 value_models=models,
                 unmodelled_peers=unmodelled,
+                epsilon=epsilon,
             )
             runs.append(run)
             if on_row is not None:

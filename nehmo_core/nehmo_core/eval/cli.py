@@ -176,6 +176,8 @@ def run(args: argparse.Namespace) -> int:
             f"{run.wall_seconds:.0f} s wall",
             file=sys.stderr,
         )
+        for arm_id, note in sorted(run.epsilon.items()):
+            print(f"  {arm_id}: {note}", file=sys.stderr)
 
     start = time.perf_counter()
     runs = run_rows(config, rows, scenarios, args.workers, not args.no_progress, report)

@@ -48,6 +48,7 @@ def row_summary(setup: str, run: RowRun) -> dict[str, Any]:
         "log_check": "ok" if not run.mismatches else f"mismatch at positions {run.mismatches}",
         "value_models": run.value_models,
         "unmodelled_peers": run.unmodelled_peers,
+        "epsilon": run.epsilon,
         "episodes": [
             {
                 "scenario": r.metadata.get("scenario_set", {}).get("index"),

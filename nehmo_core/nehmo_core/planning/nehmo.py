@@ -206,10 +206,10 @@ class NehmoPlanner:
         missing = sorted(name for name, d in levels.items() if d is None)
         if certified and max(certified.values()) > s.epsilon:
             self.settings = s.replace(epsilon=max(certified.values()))
-        parts = [f"ε = {self.settings.epsilon:.4g} m = max({s.epsilon:g}"]
-        parts += [f"δ {name} {d:.4g}" for name, d in sorted(certified.items())]
-        note = ", ".join(parts) + f") at t_safe {s.t_safe:g} s"
-        return note + (f"; no certificate: {', '.join(missing)}" if missing else "")
+        deltas = ", ".join(f"{name} {d:.4g}" for name, d in sorted(certified.items()))
+        note = f"ε = {self.settings.epsilon:.4g} m: max(floor {s.epsilon:g}"
+        note += f", certified δ at t_safe {s.t_safe:g} s: {deltas})" if deltas else ")"
+        return note + (f"; no certificate at t_safe for: {', '.join(missing)}" if missing else "")
 
     def _self_rows(self, q: np.ndarray) -> SelfClearanceRows | None:
         return self.self_clearance.rows(q) if self.self_clearance is not None else None
