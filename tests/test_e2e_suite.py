@@ -24,11 +24,14 @@ from _ros_testutil import DOMAIN_ID, finish, start
 
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.metrics import EpisodeResult
-from nehmo_core.eval.planners import ModelRegistry, build_planners, parse_value_models
+from nehmo_core.eval.planners import build_planners
+from nehmo_core.planning.models import ModelRegistry, parse_value_models
 from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
-from nehmo_ros.orchestrate import EpisodeRun, SuiteSettings
-from nehmo_ros.orchestrate import run_episode as run_ros_episode
+from nehmo_core.sim.scenario_files import save_scenario_set
+from nehmo_core.sim.scenarios import generate_scenario_set
+from nehmo_ros.suite import EpisodeRun
+from nehmo_ros.suite import run_episode as run_ros_episode
+from nehmo_ros.suite_settings import SuiteSettings
 
 CELL = load_cell("dual_ur5")
 SEED, INDEX = 0, 11
@@ -84,7 +87,7 @@ def test_the_nodes_ran_from_the_install_space(suite: Any, colcon_install: Path) 
 
 @pytest.fixture(scope="module")
 def batch(scenario_file: Path) -> EpisodeResult:
-    from nehmo_core.sim.scenarios import load_scenario_set
+    from nehmo_core.sim.scenario_files import load_scenario_set
 
     scenario = load_scenario_set(scenario_file).scenarios[INDEX]
     registry = ModelRegistry(parse_value_models(["synthetic"]))

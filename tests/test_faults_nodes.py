@@ -27,7 +27,7 @@ from std_msgs.msg import Float64MultiArray
 from nehmo_core.robots import load_cell
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import sample_scenario, scenario_rng
-from nehmo_ros.orchestrate import Process, node_command
+from nehmo_ros.processes import Process, node_command
 
 #: What a status says when the planner itself ran on the tick's observations.
 PLANNED = {"optimal", "naive", "unconstrained", "infeasible", "iteration_limit", "timeout"}

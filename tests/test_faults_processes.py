@@ -27,8 +27,9 @@ from _ros_testutil import DOMAIN_ID, REPO, child_env
 from nehmo_core.logs import LogFileError, iter_log, read_log, summarize
 from nehmo_core.logs.messages import DiagnosticStatus, JointState
 from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
-from nehmo_ros.orchestrate import Process, node_command
+from nehmo_core.sim.scenario_files import save_scenario_set
+from nehmo_core.sim.scenarios import generate_scenario_set
+from nehmo_ros.processes import Process, node_command
 
 STARTUP_S = 240.0
 COMMAND_TIMEOUT = 0.2  # the bridge's watchdog [s]

@@ -28,8 +28,11 @@ from _ros_testutil import DOMAIN_ID, child_env
 
 from nehmo_core.eval.metrics import EpisodeResult, evaluate_log
 from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
-from nehmo_ros.orchestrate import EpisodeRun, Process, SuiteSettings, node_command, run_episode
+from nehmo_core.sim.scenario_files import save_scenario_set
+from nehmo_core.sim.scenarios import generate_scenario_set
+from nehmo_ros.processes import Process, node_command
+from nehmo_ros.suite import EpisodeRun, run_episode
+from nehmo_ros.suite_settings import SuiteSettings
 
 
 def _netns_unavailable() -> str:

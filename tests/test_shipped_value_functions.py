@@ -9,7 +9,11 @@ import pytest
 import torch
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
-from nehmo_core.hjr.train import SHIPPED_VALUE_FUNCTIONS, load_value_function, shipped_value_path
+from nehmo_core.hjr.model_files import (
+    SHIPPED_VALUE_FUNCTIONS,
+    load_value_function,
+    shipped_value_path,
+)
 
 SHIPPED = [
     (name, variant) for name, variants in SHIPPED_VALUE_FUNCTIONS.items() for variant in variants
