@@ -45,19 +45,10 @@ def test_02_plans_one_batch_episode(tmp_path: Path) -> None:
     assert any(out.rglob("*.mcap"))
 
 
-def test_03_runs_the_node_suite(tmp_path: Path) -> None:
+def test_03_runs_the_node_suite_on_a_custom_cell(tmp_path: Path) -> None:
     out = tmp_path / "suite"
-    stdout = _run(
-        "03_node_suite.py",
-        "--cell",
-        "ur5_kinova",
-        "--time-limit",
-        "0.5",
-        "--out",
-        str(out),
-        cwd=tmp_path,
-    )
-    assert "cell ur5_kinova: arms ['ur5_0', 'kinova_0']" in stdout
+    stdout = _run("03_node_suite.py", "--time-limit", "0.5", "--out", str(out), cwd=tmp_path)
+    assert "cell cell.yaml: arms ['ur5_0', 'ur5_1']" in stdout
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["episodes"]) == 1
     assert summary["episodes"][0]["outcome"] in ("success", "collision", "stuck")
