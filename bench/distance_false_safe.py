@@ -40,7 +40,6 @@ def main() -> int:
     parser.add_argument("--episodes-dir", type=Path, required=True)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    import nehmo_core.hjr.arm_pairs  # noqa: F401  (registers the arm-pair systems)
 
     rows = []
     for pair, setups in PAIRS.items():

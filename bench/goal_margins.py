@@ -25,12 +25,12 @@ from typing import Any
 import numpy as np
 from _report import machine_at_end, write_report
 
-from nehmo_core.eval.planners import ModelRegistry
 from nehmo_core.eval.setups import get_setup
 from nehmo_core.planning.factory import make_planner
+from nehmo_core.planning.models import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.sim.scenarios import load_scenario_set
+from nehmo_core.sim.scenario_files import load_scenario_set
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SETUPS = {  # setup → (table file, nehmo row)

@@ -18,8 +18,8 @@ from pathlib import Path
 import torch
 
 from nehmo_core.hjr.ground_truth import ground_truth, validate
+from nehmo_core.hjr.model_files import load_value_function
 from nehmo_core.hjr.systems import make_system
-from nehmo_core.hjr.train import load_value_function
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

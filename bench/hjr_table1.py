@@ -31,8 +31,10 @@ import torch
 from hjr_tune import train_and_validate
 
 from nehmo_core.hjr.ground_truth import ground_truth
+from nehmo_core.hjr.model_files import load_value_function
 from nehmo_core.hjr.systems import make_system
-from nehmo_core.hjr.train import PRESETS, TrainSettings, load_value_function, parse_count
+from nehmo_core.hjr.train_cli import parse_count
+from nehmo_core.hjr.train_settings import PRESETS, TrainSettings
 
 RESULTS = Path(__file__).resolve().parent / "results"
 RUNS = RESULTS / "hjr_runs"

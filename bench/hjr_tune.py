@@ -23,8 +23,11 @@ from typing import Any
 import torch
 
 from nehmo_core.hjr.ground_truth import ground_truth, validate
+from nehmo_core.hjr.model_files import load_value_function
 from nehmo_core.hjr.systems import HJISystem, make_system
-from nehmo_core.hjr.train import TrainSettings, load_value_function, parse_count, train
+from nehmo_core.hjr.train import train
+from nehmo_core.hjr.train_cli import parse_count
+from nehmo_core.hjr.train_settings import TrainSettings
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TUNING_LOG = RESULTS / "hjr_tuning.jsonl"

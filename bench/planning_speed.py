@@ -57,12 +57,12 @@ import numpy as np
 import torch
 from _report import cpu_model
 
-from nehmo_core.eval.planners import ModelRegistry
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr import load_value_function
 from nehmo_core.hjr.casadi_export import value_functions
 from nehmo_core.planning.chomp import plan_chomp
 from nehmo_core.planning.codegen import compile_function
+from nehmo_core.planning.models import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.synthetic import planning_distance_model, random_value_function

@@ -49,15 +49,10 @@ from nehmo_core.logs.messages import DiagnosticArray, DiagnosticStatus
 from nehmo_core.logs.topics import COLLISIONS_TOPIC
 from nehmo_core.logs.writer import remove_bag
 from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
-from nehmo_ros.orchestrate import (
-    Process,
-    SuiteSettings,
-    child_env,
-    isolated_domain,
-    node_command,
-    reported_rmw,
-)
+from nehmo_core.sim.scenario_files import save_scenario_set
+from nehmo_core.sim.scenarios import generate_scenario_set
+from nehmo_ros.processes import Process, child_env, isolated_domain, node_command, reported_rmw
+from nehmo_ros.suite_settings import SuiteSettings
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PERIOD_MS, TOLERANCE_MS = 40.0, 5.0

@@ -28,15 +28,10 @@ from _report import machine_at_end, write_report
 from nehmo_core.logs import iter_log
 from nehmo_core.logs.messages import DiagnosticStatus
 from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
-from nehmo_ros.orchestrate import (
-    Process,
-    SuiteSettings,
-    child_env,
-    isolated_domain,
-    node_command,
-    reported_rmw,
-)
+from nehmo_core.sim.scenario_files import save_scenario_set
+from nehmo_core.sim.scenarios import generate_scenario_set
+from nehmo_ros.processes import Process, child_env, isolated_domain, node_command, reported_rmw
+from nehmo_ros.suite_settings import SuiteSettings
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PERIOD_MS, TOLERANCE_MS = 40.0, 5.0

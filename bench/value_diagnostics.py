@@ -21,7 +21,7 @@ from _report import machine_at_end, write_report
 
 from nehmo_core.hjr import load_value_function
 from nehmo_core.hjr.diagnostics import pde_diagnostics
-from nehmo_core.hjr.train import SHIPPED_VALUE_FUNCTIONS
+from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.hjr.arm_pairs import ARM_PAIRS, make_arm_pair_system
+from nehmo_core.hjr.systems.arm_pairs import ARM_PAIRS, make_arm_pair_system
 from nehmo_core.robots.loader import cell_from_dict
 
 

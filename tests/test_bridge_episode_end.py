@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from nehmo_core.robots import load_cell
-from sim_bridge.bridge import DEFAULTS, BridgeSettings, SimBridgeNode
+from sim_bridge.bridge import SimBridgeNode
+from sim_bridge.settings import DEFAULTS, BridgeSettings
 
 
 def _bridge(at_goal: bool, t: float, **changes: object) -> SimpleNamespace:

@@ -11,7 +11,8 @@ import pytest
 import sim_bridge.bridge as bridge_module
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.robots import load_cell
-from sim_bridge.bridge import DEFAULTS, BridgeSettings, SimBridgeNode
+from sim_bridge.bridge import SimBridgeNode
+from sim_bridge.settings import DEFAULTS, BridgeSettings
 
 CELL = load_cell("dual_ur5")
 COMMAND = [0.1] * 6

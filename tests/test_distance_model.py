@@ -31,20 +31,6 @@ PAIRS = list(SHIPPED_DISTANCE_MODELS)
 CLOSE_PAIRS = ["ur5_ur5", "ur5_kinova"]
 
 
-# held-out mean error within 10 cm of contact, conservative offset included [m]; the 1.2 m pair
-# needs a larger offset for the same false-safe rate (README, Limitations)
-NEAR_MAE_BOUND = {"ur5_ur5_opposite": 0.025}
-
-
-@pytest.mark.parametrize("pair", PAIRS)
-def test_model_card_reports_accuracy(pair: str) -> None:
-    card = json.loads((MODELS_DIR / f"distance_{pair}.json").read_text())
-    acc = card["accuracy_held_out"]
-    assert acc["mae_near_m"] <= NEAR_MAE_BOUND.get(pair, 0.015)
-    assert acc["false_safe_rate"] <= 0.02
-    assert card["training"]["train_wall_time_s"] > 0
-
-
 @pytest.mark.parametrize("pair", PAIRS)
 def test_agrees_with_exact_distance_near_contact(pair: str) -> None:
     """A fresh spot check (the full figures come from bench/distance_nets.py): uniform samples,

@@ -15,7 +15,6 @@ from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log, planning_times
-from nehmo_core.eval.planners import parse_value_models
 from nehmo_core.eval.report import markdown_table
 from nehmo_core.eval.scenario_sets import naive_collides, scenario_set_for
 from nehmo_core.eval.setups import get_setup, parse_row
@@ -23,20 +22,14 @@ from nehmo_core.geometry.pybullet_world import CellWorld, Collision
 from nehmo_core.hjr.networks import NetworkSettings
 from nehmo_core.planning.baselines import NaivePlanner
 from nehmo_core.planning.interface import PlanResult, Telemetry
+from nehmo_core.planning.models import parse_value_models
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.synthetic import random_value_function
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
-from nehmo_core.sim.scenarios import (
-    Scenario,
-    ScenarioFileError,
-    generate_scenario_set,
-    load_scenario_set,
-    sample_scenario,
-    save_scenario_set,
-    scenario_rng,
-)
+from nehmo_core.sim.scenario_files import ScenarioFileError, load_scenario_set, save_scenario_set
+from nehmo_core.sim.scenarios import Scenario, generate_scenario_set, sample_scenario, scenario_rng
 
 DUAL = load_cell("dual_ur5")
 DT = 0.04
@@ -346,7 +339,7 @@ def test_evaluate_command_writes_logs_summary_and_table(tmp_path: Path) -> None:
 
 
 def test_value_model_snapshots_freeze_a_training_run(tmp_path: Path) -> None:
-    from nehmo_core.eval.planners import snapshot_value_models
+    from nehmo_core.planning.models import snapshot_value_models
 
     run = tmp_path / "run"
     run.mkdir()
@@ -428,7 +421,7 @@ def test_one_line_summaries_give_the_papers_cr_and_self_collisions_apart() -> No
     from types import SimpleNamespace
 
     from nehmo_core.eval.batch import _postfix
-    from nehmo_ros.orchestrate import format_metrics
+    from nehmo_ros.suite import format_metrics
 
     episodes = [
         SimpleNamespace(outcome="collision", collision_kind="self"),

@@ -9,8 +9,8 @@ import pytest
 from scipy.optimize import linprog
 
 from nehmo_core.errors import UnknownNameError
-from nehmo_core.eval.planners import ModelRegistry
 from nehmo_core.planning.fail_safe import MaximinFailSafe, maximin_command, worst_case_rates
+from nehmo_core.planning.models import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell

@@ -22,7 +22,8 @@ import pytest
 from _ros_testutil import REPO, child_env
 
 from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
+from nehmo_core.sim.scenario_files import save_scenario_set
+from nehmo_core.sim.scenarios import generate_scenario_set
 
 MODELS = REPO / "nehmo_core" / "nehmo_core" / "models"
 MARKER = "pickle_code_ran"
@@ -190,7 +191,7 @@ def test_bad_scenario_files_stop_the_bridge_with_the_reason(
     root: Path, params: dict, expected: str
 ) -> None:
     from nehmo_core.errors import NehmoError
-    from sim_bridge.bridge import DEFAULTS, load_episode
+    from sim_bridge.settings import DEFAULTS, load_episode
 
     p = {**DEFAULTS, **params, "scenarios": str(root / params["scenarios"])}
     with pytest.raises(NehmoError) as info:

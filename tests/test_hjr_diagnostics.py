@@ -7,7 +7,7 @@ import torch
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.hjr.diagnostics import pde_diagnostics
-from nehmo_core.hjr.train import SHIPPED_VALUE_FUNCTIONS, load_value_function
+from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS, load_value_function
 
 
 def test_a_bc_network_with_zero_residual_is_exactly_the_trivial_solution() -> None:

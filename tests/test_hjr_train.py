@@ -13,18 +13,12 @@ import torch
 from safetensors.torch import load_file
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, UnknownNameError
+from nehmo_core.hjr.model_files import load_value_function
 from nehmo_core.hjr.networks import NetworkSettings
 from nehmo_core.hjr.systems import Air3D, TwoLinkPair
-from nehmo_core.hjr.train import (
-    Schedule,
-    TrainSettings,
-    draw_batch,
-    load_value_function,
-    loss_terms,
-    main,
-    parse_count,
-    train,
-)
+from nehmo_core.hjr.train import draw_batch, loss_terms, train
+from nehmo_core.hjr.train_cli import main, parse_count
+from nehmo_core.hjr.train_settings import Schedule, TrainSettings
 
 TINY = TrainSettings(
     variant="bc+sym",

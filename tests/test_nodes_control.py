@@ -21,10 +21,16 @@ NAMES = list(CELL.arm("ur5_0").robot.joint_names)
 # jump tests below turn it on).
 SETTINGS = ControlSettings(rate=25.0, deadline=0.03, peer_timeout=0.25, jump_margin=math.inf)
 FAIL_SAFE = np.full(6, 0.5)
+TIMEOUT = 30.0  # [s] longest wait for an event of another thread (never reached when passing)
 
 
 class RecordingPlanner:
-    """Commands the own first joint value, so a command tells which observation it came from."""
+    """Commands the own first joint value, so a command tells which observation it came from.
+
+    With a ``delay`` [s], ``plan()`` reports that solve time and does not return before the
+    test sets ``release``: a solve is late because the test says so, not because of the clock.
+    ``entered`` is set once ``plan()`` runs (the worker has stored the fail-safe by then).
+    """
 
     arm_id = "ur5_0"
 
@@ -32,13 +38,16 @@ class RecordingPlanner:
         self.delay = delay
         self.error = error
         self.calls: list[np.ndarray] = []
+        self.entered = threading.Event()
+        self.release = threading.Event()
 
     def plan(
         self, q_self: np.ndarray, peers: Mapping[str, np.ndarray], q_goal: np.ndarray
     ) -> PlanResult:
         self.calls.append(np.array(q_self))
+        self.entered.set()
         if self.delay:
-            time.sleep(self.delay)
+            assert self.release.wait(TIMEOUT), "the test never released the solve"
         if self.error is not None:
             raise self.error
         return PlanResult(np.full(6, q_self[0] * 0.01), Telemetry(self.delay, "optimal"))
@@ -54,7 +63,20 @@ def _controller(planner: RecordingPlanner, **changes: object) -> ArmController:
     settings = ControlSettings(**{**SETTINGS.__dict__, **changes})  # type: ignore[arg-type]
     c = ArmController(CELL, "ur5_0", planner, settings)  # type: ignore[arg-type]
     c.set_goal(NAMES, [0.1] * 6)
+    stop = c.stop
+
+    def release_then_stop() -> None:  # a solve held by the test ends before the worker stops
+        if isinstance(planner, RecordingPlanner):
+            planner.release.set()
+        stop()
+
+    c.stop = release_then_stop  # type: ignore[method-assign]
     return c
+
+
+def _in_plan(planner: RecordingPlanner) -> None:
+    """Wait until the worker runs ``planner.plan()`` (its fail-safe is stored by then)."""
+    assert planner.entered.wait(TIMEOUT)
 
 
 def _feed(c: ArmController, now: float, q0: float, peer: bool = True) -> None:
@@ -63,8 +85,8 @@ def _feed(c: ArmController, now: float, q0: float, peer: bool = True) -> None:
         c.states.update("ur5_1", NAMES, [0.0] * 6, now)
 
 
-def _wait_idle(c: ArmController, timeout: float = 2.0) -> None:
-    c.wait_idle(timeout)
+def _wait_idle(c: ArmController, timeout: float = TIMEOUT) -> None:
+    assert c.wait_idle(timeout)
 
 
 def test_command_of_tick_k_comes_from_the_observation_of_tick_k_minus_1() -> None:
@@ -105,11 +127,12 @@ def test_a_command_carries_the_state_ages_of_its_own_observation() -> None:
 
 
 def test_missed_deadline_publishes_the_fail_safe_of_the_previous_observation() -> None:
-    c = _controller(RecordingPlanner(delay=0.1))
+    planner = RecordingPlanner(delay=0.1)
+    c = _controller(planner)
     try:
         _feed(c, 0.0, 1.0)
         c.tick(0.0)
-        time.sleep(0.01)  # the worker has computed the fail-safe and is inside plan()
+        _in_plan(planner)
         late = c.tick(0.04)
         assert late.status == "deadline_missed" and late.fail_safe
         np.testing.assert_array_equal(late.velocity, FAIL_SAFE)
@@ -119,11 +142,12 @@ def test_missed_deadline_publishes_the_fail_safe_of_the_previous_observation() -
 
 
 def test_a_hung_solver_ends_in_holding_still() -> None:
-    c = _controller(RecordingPlanner(delay=1.0), peer_timeout=0.1)
+    planner = RecordingPlanner(delay=1.0)
+    c = _controller(planner, peer_timeout=0.1)
     try:
         _feed(c, 0.0, 1.0)
         c.tick(0.0)
-        time.sleep(0.01)
+        _in_plan(planner)
         decisions = [c.tick(0.04 * k) for k in range(1, 6)]
         assert all(d.status == "deadline_missed" for d in decisions)
         assert not decisions[0].hold  # the fail-safe first ...
@@ -243,14 +267,15 @@ def test_unknown_stale_policy_lists_the_valid_ones() -> None:
 
 
 def test_worker_never_blocks_the_tick() -> None:
-    c = _controller(RecordingPlanner(delay=0.2))
+    planner = RecordingPlanner(delay=0.2)
+    c = _controller(planner)
     try:
         _feed(c, 0.0, 1.0)
         c.tick(0.0)
-        started = time.perf_counter()
-        c.tick(0.04)
-        assert time.perf_counter() - started < 0.02
-        assert threading.active_count() >= 2
+        _in_plan(planner)
+        d = c.tick(0.04)  # returns while the solve is still held inside plan()
+        assert d.status == "deadline_missed" and not planner.release.is_set()
+        assert len(planner.calls) == 1
     finally:
         c.stop()
 
@@ -372,7 +397,7 @@ def _run_ticks(c: ArmController, ticks: int, period: float = 0.04) -> list:
     for k in range(ticks):
         _feed(c, k * period, 0.0)
         out.append(c.tick(k * period))
-        time.sleep(0.005)
+        _wait_idle(c)
     return out
 
 
@@ -460,11 +485,12 @@ def test_solver_raise_ends_in_the_planners_own_fail_safe() -> None:
 def test_a_missed_deadline_has_no_solve_time_and_the_late_one_follows() -> None:
     """A miss reports NaN (no solve finished in time); the abandoned solve's real time comes
     with the first command after it finished."""
-    c = _controller(RecordingPlanner(delay=0.1))  # plan() reports 0.1 s
+    planner = RecordingPlanner(delay=0.1)  # plan() reports 0.1 s
+    c = _controller(planner)
     try:
         _feed(c, 0.0, 1.0)
         c.tick(0.0)  # job of tick 0 starts
-        time.sleep(0.01)
+        _in_plan(planner)
         missed = c.tick(0.04)  # tick 0's solve is late
         assert missed.status == "deadline_missed" and missed.tick == 0
         assert math.isnan(missed.solve_time) and math.isnan(missed.late_solve_time)
@@ -472,6 +498,7 @@ def test_a_missed_deadline_has_no_solve_time_and_the_late_one_follows() -> None:
         assert busy.status == "deadline_missed" and busy.tick == 2
         assert math.isnan(busy.solve_time) and math.isnan(busy.late_solve_time)
         assert math.isnan(c.telemetry(busy).solve_time)
+        planner.release.set()
         _wait_idle(c)
         after = c.tick(0.12)
         assert after.late_solve_time == pytest.approx(0.1) and after.late_tick == 0
@@ -494,18 +521,20 @@ def test_a_late_solve_time_comes_with_the_next_planned_command() -> None:
             self.delay = 0.06 if not self.calls else 0.0
             return super().plan(q_self, peers, q_goal)
 
-    c = _controller(SlowOnce())
+    planner = SlowOnce()
+    c = _controller(planner)
     try:
         _feed(c, 0.0, 1.0)
         c.tick(0.0)
-        time.sleep(0.01)
+        _in_plan(planner)
         missed = c.tick(0.04)
         assert missed.status == "deadline_missed" and math.isnan(missed.solve_time)
         take = c._worker.take
 
         def take_then_finish() -> Decision | None:
             result = take()
-            c._worker.wait_idle(1.0)  # the abandoned job ends right after the take
+            planner.release.set()
+            assert c._worker.wait_idle(TIMEOUT)  # the abandoned job ends right after the take
             return result
 
         c._worker.take = take_then_finish  # type: ignore[method-assign]
@@ -521,20 +550,23 @@ def test_a_late_solve_time_comes_with_the_next_planned_command() -> None:
 
 
 class SlowFailSafe(RecordingPlanner):
-    """A fail-safe that takes 0.1 s: a tick with a stale peer (policy fail_safe) misses."""
+    """A fail-safe held until the test releases it: a tick with a stale peer (policy
+    fail_safe) misses."""
 
     def fail_safe(self, q_self: np.ndarray, peers: Mapping[str, np.ndarray]) -> np.ndarray:
-        time.sleep(0.1)
+        self.entered.set()
+        assert self.release.wait(TIMEOUT), "the test never released the fail-safe"
         return FAIL_SAFE.copy()
 
 
 def test_a_missed_deadline_keeps_the_stale_and_untrusted_peers() -> None:
-    c = _controller(SlowFailSafe(), stale_policy="fail_safe")
+    planner = SlowFailSafe()
+    c = _controller(planner, stale_policy="fail_safe")
     try:
         c.states.update("ur5_1", NAMES, [0.0] * 6, 0.0)  # the peer's last message
         c.states.update("ur5_0", NAMES, [1.0] + [0.0] * 5, 1.0)
         c.tick(1.0)  # observation of tick 0: the peer is stale; its fail-safe is slow
-        time.sleep(0.01)
+        assert planner.entered.wait(TIMEOUT)
         c.states.update("ur5_1", NAMES, [math.nan] * 6, 1.02)  # rejected: now untrusted too
         c.states.update("ur5_0", NAMES, [1.0] + [0.0] * 5, 1.04)
         missed = c.tick(1.04)  # the solve of tick 0 is late
@@ -566,11 +598,12 @@ class BadFailSafe(RecordingPlanner):
 def test_the_fail_safe_of_a_missed_deadline_is_clipped_and_finite(
     value: float, expected: float, hold: bool
 ) -> None:
-    c = _controller(BadFailSafe(value))
+    planner = BadFailSafe(value)
+    c = _controller(planner)
     try:
         _feed(c, 0.0, 1.0)
         c.tick(0.0)
-        time.sleep(0.01)  # the fail-safe is stored; plan() runs
+        _in_plan(planner)  # the fail-safe is stored; plan() runs
         d = c.tick(0.04)
         assert d.status == "deadline_missed" and d.hold == hold
         np.testing.assert_array_equal(d.velocity, np.full(6, expected))
@@ -605,14 +638,16 @@ def test_the_status_of_a_missed_deadline_reads_back_with_its_solve_times() -> No
     from nehmo_core.logs.messages import DiagnosticStatus, deserialize, serialize
     from nehmo_ros.arm_planner import ArmPlannerNode
 
-    c = _controller(RecordingPlanner(delay=0.1))
+    planner = RecordingPlanner(delay=0.1)
+    c = _controller(planner)
     node = ArmPlannerNode.__new__(ArmPlannerNode)
     node.arm_id, node.kind, node.controller, node.fault = "ur5_0", "nehmo", c, ""
     try:
         _feed(c, 0.0, 1.0)
         c.tick(0.0)
-        time.sleep(0.01)
+        _in_plan(planner)
         missed = c.tick(0.04)
+        planner.release.set()
         _wait_idle(c)
         after = c.tick(0.08)
         statuses = []

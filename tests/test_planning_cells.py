@@ -13,13 +13,14 @@ from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
-from nehmo_core.eval.planners import SHIPPED_PAIRS, ModelRegistry, build_planners, pair_geometry
+from nehmo_core.eval.planners import build_planners
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr.networks import NetworkSettings
 from nehmo_core.planning.baselines import NaivePlanner, TrajectoryTracker, retime
 from nehmo_core.planning.chomp import plan_chomp
 from nehmo_core.planning.factory import centralized_trackers, make_planner
 from nehmo_core.planning.interface import PlanResult, Telemetry
+from nehmo_core.planning.models import SHIPPED_PAIRS, ModelRegistry, pair_geometry
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.pair_frame import (
     base_yaw_joint,
@@ -101,7 +102,7 @@ def test_kinova_controlled_pairs_map_into_the_kinova_ur5_frame() -> None:
     """The Kinova (first joint about −z) turned in its cell maps by shifts onto kinova_ur5."""
     import torch
 
-    from nehmo_core.hjr.arm_pairs import make_arm_pair_system
+    from nehmo_core.hjr.systems.arm_pairs import make_arm_pair_system
 
     frame = inverse_pose(load_cell("ur5_kinova").arm("kinova_0").base)  # the UR5 seen from it
     model = [("kinova_gen3_6dof", "ur5", frame)]

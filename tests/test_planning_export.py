@@ -15,11 +15,11 @@ import torch
 from nehmo_core.errors import NehmoError, UnknownNameError
 from nehmo_core.geometry.distance_casadi import distance_function
 from nehmo_core.geometry.symmetry import robot_mirror_map
-from nehmo_core.hjr.arm_pairs import SwappedBoundary
 from nehmo_core.hjr.casadi_export import value_functions
+from nehmo_core.hjr.model_files import load_value_function
 from nehmo_core.hjr.networks import NetworkSettings, ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import ArmPairSystem, JointInterval
-from nehmo_core.hjr.train import load_value_function
+from nehmo_core.hjr.systems.arm_pairs import SwappedBoundary
 from nehmo_core.planning import codegen
 from nehmo_core.planning.codegen import compile_function
 from nehmo_core.planning.synthetic import proxy_distance_model, random_value_function

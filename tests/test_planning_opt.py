@@ -17,11 +17,13 @@ from nehmo_core.hjr.networks import NetworkSettings
 from nehmo_core.planning import native, sqp
 from nehmo_core.planning.baselines import NaivePlanner, TrajectoryTracker, retime
 from nehmo_core.planning.ipopt_solver import IpoptSolver
-from nehmo_core.planning.nehmo import NehmoPlanner, SqpSolver, make_solver
+from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
+from nehmo_core.planning.qp import qp_step
 from nehmo_core.planning.self_clearance import SelfClearanceRows
 from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.sqp import SolveResult, qp_step, solve_sqp
+from nehmo_core.planning.solvers import SqpSolver, make_solver
+from nehmo_core.planning.sqp import SolveResult, solve_sqp
 from nehmo_core.planning.synthetic import random_value_function
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots import load_cell

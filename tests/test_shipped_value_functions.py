@@ -9,7 +9,11 @@ import pytest
 import torch
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
-from nehmo_core.hjr.train import SHIPPED_VALUE_FUNCTIONS, load_value_function, shipped_value_path
+from nehmo_core.hjr.model_files import (
+    SHIPPED_VALUE_FUNCTIONS,
+    load_value_function,
+    shipped_value_path,
+)
 
 SHIPPED = [
     (name, variant) for name, variants in SHIPPED_VALUE_FUNCTIONS.items() for variant in variants
@@ -31,12 +35,10 @@ def _states(vf, count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:  # type
 
 
 @pytest.mark.parametrize(("name", "variant"), SHIPPED)
-def test_model_card(name: str, variant: str) -> None:
+def test_model_card_names_its_model(name: str, variant: str) -> None:
     card = json.loads(shipped_value_path(name, variant).with_suffix(".json").read_text())
     assert card["system"]["name"] == name
     assert card["settings"]["variant"] == variant
-    assert card["card"]["train_wall_time_s"] > 0
-    assert card["card"]["samples_drawn"] > 0
 
 
 @pytest.mark.parametrize(("name", "variant"), [s for s in SHIPPED if s[1] == "bc+sym"])

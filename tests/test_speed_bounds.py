@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.eval.planners import ModelRegistry
+from nehmo_core.planning.models import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.speed_bounds import PeerBounds

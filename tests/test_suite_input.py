@@ -8,7 +8,7 @@ import pytest
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_ros.demo import main as demo_main
-from nehmo_ros.orchestrate import SuiteSettings
+from nehmo_ros.suite_settings import SuiteSettings
 
 
 @pytest.mark.parametrize("row", ["chomp", "nehmo/ompl", "bogus"])

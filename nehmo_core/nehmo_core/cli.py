@@ -28,7 +28,7 @@ _COMMANDS: dict[str, tuple[str, str, str, str]] = {
         "evaluate planners on the paper's setups (metrics from the logs)",
     ),
     "train": (
-        "nehmo_core.hjr.train",
+        "nehmo_core.hjr.train_cli",
         "add_train_arguments",
         "run_train",
         "train a neural HJR value function (deepreach | bc | bc+sym)",
@@ -53,7 +53,6 @@ def build_parser() -> argparse.ArgumentParser:
         prog="nehmo", description="NeHMO: safety-aware decentralized multi-arm motion planning"
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    importlib.import_module("nehmo_core.hjr.arm_pairs")  # registers the UR5 pair systems
     for name, (module, add_fn, run_fn, help_text) in _COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
         mod = importlib.import_module(module)

@@ -95,7 +95,10 @@ PARAMS: dict[str, Param] = {
     "rate": Param(_CONTROL.rate, "[Hz] command rate", 1e-3, 1000.0),
     "t_plan": Param(_PLANNER.t_plan, "[s] planning horizon (command hold time in Opt)"),
     "t_safe": Param(_PLANNER.t_safe, "[s] time-to-go at which V must stay >= epsilon"),
-    "epsilon": Param(_PLANNER.epsilon, "[m] safety margin on V"),
+    "epsilon": Param(_PLANNER.epsilon, "[m] safety margin on V (the floor when certified)"),
+    "certified_epsilon": Param(
+        _PLANNER.certified_epsilon, "raise epsilon to the models' certified level at t_safe"
+    ),
     "u_max": Param(_PLANNER.u_max, "[rad/s] own joint speed bound"),
     "d_max": Param(_PLANNER.d_max, "[rad/s] peers' joint speed bound (worst case)"),
     "solver": Param(_PLANNER.solver, "sqp | ipopt"),
@@ -175,6 +178,7 @@ class ArmPlannerNode(Node):
         fault = parse_fault(str(p["fault_injection"]))
         settings = PlannerSettings(
             epsilon=float(p["epsilon"]),
+            certified_epsilon=bool(p["certified_epsilon"]),
             t_plan=float(p["t_plan"]),
             t_safe=float(p["t_safe"]),
             u_max=float(p["u_max"]),
@@ -193,6 +197,9 @@ class ArmPlannerNode(Node):
         unmodelled = getattr(planner, "peers_unmodelled", ())
         if unmodelled:
             self.get_logger().warning(f"peers {list(unmodelled)} are NOT constrained")
+        epsilon_source = getattr(planner, "epsilon_source", "")
+        if epsilon_source:
+            self.get_logger().info(epsilon_source)
         warm_up(planner, self.cell, arm_id)
         self.fault = ""
         if fault is not None:

@@ -1,7 +1,11 @@
 """One arm's control loop without a middleware: state buffer, solve worker, fail-safe rules.
 
 The ``arm_planner`` node is a thin shell around :class:`ArmController`; everything here is
-tested without ROS. Timing (DESIGN.md § 3): at tick ``k`` the controller publishes the command
+tested without ROS. It lives in ``nehmo_ros`` although it imports no ROS package because it is
+the node's behaviour (its parameters, rules and counters), not a planning algorithm: the core's
+batch runner plans on a fixed clock and has no deadlines, stale peers or rejected messages.
+
+Timing: at tick ``k`` the controller publishes the command
 solved from the observations of tick ``k − 1`` and hands the observations of tick ``k`` to a
 worker thread, so a solve has one whole period while the current command executes.
 
@@ -45,8 +49,8 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import numpy as np
@@ -54,7 +58,9 @@ import numpy as np
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.planning.interface import Planner, Telemetry
 from nehmo_core.planning.speed_bounds import FULL_SPEED, PeerBounds
-from nehmo_core.robots.model import Cell, RobotModel
+from nehmo_core.robots.model import Cell
+from nehmo_ros.solve_worker import Decision, Observation, SolveWorker, zeros
+from nehmo_ros.state_buffer import StateBuffer, order_joints
 
 __all__ = [
     "STALE_POLICIES",
@@ -66,8 +72,6 @@ __all__ = [
 ]
 
 STALE_POLICIES = ("fail_safe", "hold")
-#: Statuses of a controller that cannot plan yet (nothing to command).
-WAITING = ("starting", "no_own_state", "no_goal", "waiting_for_peers")
 
 
 @dataclass(frozen=True)
@@ -105,236 +109,6 @@ class ControlSettings:
         return 1.0 / self.rate
 
 
-# ------------------------------------------------------------------------------- state buffer
-@dataclass
-class _Latest:
-    q: np.ndarray
-    received: float  # [s] monotonic
-    stamp_ns: int  # header stamp [ns] (0: none)
-
-
-class StateBuffer:
-    """Latest valid joint state [rad] of every arm of a cell, with its receive time.
-
-    ``speed`` [rad/s] per arm and ``jump_margin`` [rad] set the jump test (module docstring);
-    without them only malformed states are caught.
-    """
-
-    def __init__(
-        self,
-        cell: Cell,
-        speed: Mapping[str, float] | None = None,
-        jump_margin: float = math.inf,
-    ) -> None:
-        self.cell = cell
-        self.speed = dict(speed or {})
-        self.jump_margin = jump_margin
-        self._lock = threading.Lock()
-        self._latest: dict[str, _Latest] = {}
-        self._untrusted_at: dict[str, float] = {}
-        self.rejected: dict[str, int] = {a: 0 for a in cell.arm_ids}
-        self.jumps: dict[str, int] = {a: 0 for a in cell.arm_ids}
-        self.last_rejection: dict[str, str] = {}
-
-    def update(
-        self,
-        arm_id: str,
-        names: Sequence[str],
-        position: Sequence[float],
-        now: float,
-        stamp_ns: int = 0,
-    ) -> str | None:
-        """Store a joint state. Returns None for a plain valid state, else what was wrong:
-        ``"rejected: ..."`` (not stored) or ``"jumped ..."`` (stored, arm untrusted)."""
-        robot = self.cell.arm(arm_id).robot
-        try:
-            q = order_joints(robot, names, position, f"/{arm_id}/joint_states")
-        except (InvalidValueError, ValueError, TypeError) as err:
-            with self._lock:
-                self.rejected[arm_id] += 1
-                self.last_rejection[arm_id] = str(err)
-                self._untrusted_at[arm_id] = now
-            return f"rejected: {err}"
-        note = None
-        with self._lock:
-            previous = self._latest.get(arm_id)
-            if previous is not None and math.isfinite(self.jump_margin):
-                note = self._jump(arm_id, previous, q, now, stamp_ns)
-                if note is not None:
-                    self.jumps[arm_id] += 1
-                    self._untrusted_at[arm_id] = now
-            self._latest[arm_id] = _Latest(q, now, stamp_ns)
-        return note
-
-    def _jump(
-        self, arm_id: str, previous: _Latest, q: np.ndarray, now: float, stamp_ns: int
-    ) -> str | None:
-        """Why ``q`` is a jump from ``previous``, or None when it is reachable."""
-        robot = self.cell.arm(arm_id).robot
-        dt = max(now - previous.received, 0.0)
-        if stamp_ns > 0 and previous.stamp_ns > 0:
-            dt = max(dt, (stamp_ns - previous.stamp_ns) / 1e9)
-        speed = self.speed.get(arm_id, math.inf)
-        allowed = self.jump_margin + 2.0 * speed * dt
-        step = np.abs(robot.wrap(q - previous.q))
-        if not float(step.max()) > allowed:
-            return None
-        joint = robot.joint_names[int(np.argmax(step))]
-        return (
-            f"jumped {float(step.max()):.3f} rad on {joint} in {dt * 1e3:.0f} ms (allowed "
-            f"{allowed:.3f} rad at {speed:g} rad/s)"
-        )
-
-    def untrusted(self, now: float, window: float) -> tuple[str, ...]:
-        """Arms whose data was rejected or jumped within the last ``window`` seconds."""
-        with self._lock:
-            return tuple(a for a, t in self._untrusted_at.items() if now - t <= window)
-
-    def get(self, arm_id: str) -> tuple[np.ndarray, float] | None:
-        """``(q, receive time)`` of ``arm_id``'s latest valid state, or None."""
-        with self._lock:
-            latest = self._latest.get(arm_id)
-        return None if latest is None else (latest.q, latest.received)
-
-
-def order_joints(
-    robot: RobotModel, names: Sequence[str], position: Sequence[float], parameter: str
-) -> np.ndarray:
-    """Positions in the robot's joint order: by ``names`` when given, else as they come."""
-    values = np.asarray(list(position), dtype=np.float64)
-    if names:
-        names = list(names)
-        if len(values) == len(names) and names == list(robot.joint_names):
-            return robot.check_q(values, parameter)  # in the robot's order already
-        if sorted(names) != sorted(robot.joint_names) or len(values) != len(names):
-            raise InvalidValueError(
-                parameter,
-                f"must name the joints of robot '{robot.name}' {list(robot.joint_names)} "
-                "once each, with one position per name",
-                {"name": names, "position": values.tolist()},
-            )
-        values = values[[names.index(j) for j in robot.joint_names]]
-    return robot.check_q(values, parameter)
-
-
-# ----------------------------------------------------------------------------- observations
-@dataclass(frozen=True)
-class Observation:
-    """What one tick saw: own and peer states [rad], their ages [s], the goal [rad]."""
-
-    tick: int
-    stamp_ns: int  # ROS time [ns] of the tick (simulated time under use_sim_time)
-    q_self: np.ndarray | None  # None: own state missing or stale
-    peers: Mapping[str, np.ndarray]  # last known state of every peer heard from
-    ages: Mapping[str, float]  # [s] age of every arm's state (inf: never received)
-    stale: tuple[str, ...]  # peers whose last state is older than peer_timeout
-    missing: tuple[str, ...]  # peers never heard from
-    goal: np.ndarray | None
-    untrusted: tuple[str, ...] = ()  # peers with rejected or jumping states lately
-    own_untrusted: bool = False  # the own arm's states were rejected or jumped lately
-
-
-@dataclass(frozen=True)
-class Decision:
-    """A command (dof,) [rad/s] and why it was chosen."""
-
-    velocity: np.ndarray
-    status: str
-    fail_safe: bool = False
-    hold: bool = False
-    tick: int = -1  # the observation tick it was computed from
-    observation_ns: int = 0  # ROS time [ns] of that observation
-    #: [s] plan() time when the planner ran, else the worker's job time; NaN when no solve
-    #: finished in time (``deadline_missed``)
-    solve_time: float = 0.0
-    telemetry: Telemetry | None = None  # the planner's own report, when it ran
-    stale: tuple[str, ...] = ()
-    missing: tuple[str, ...] = ()
-    untrusted: tuple[str, ...] = ()
-    ages: Mapping[str, float] = field(default_factory=dict)  # [s] state ages at that observation
-    error: str = ""
-    #: [s] solve time of an abandoned (late) solve that finished since the previous command,
-    #: and the tick it solved; NaN and -1 when there is none
-    late_solve_time: float = math.nan
-    late_tick: int = -1
-
-    @property
-    def planned(self) -> bool:
-        """True when the planner itself produced this command (plan() ran on time)."""
-        return self.telemetry is not None
-
-    @property
-    def ready(self) -> bool:
-        """False while the arm waits for its own state, its goal or a first peer state."""
-        return self.status not in WAITING
-
-
-def _zeros(dof: int) -> np.ndarray:
-    return np.zeros(dof)
-
-
-# ----------------------------------------------------------------------------- the worker
-class SolveWorker:
-    """A background thread that runs one job at a time; the tick thread never waits on it."""
-
-    def __init__(self, solve: Callable[[Observation], Decision], name: str = "solve") -> None:
-        self._solve = solve
-        self._cond = threading.Condition()
-        self._job: Observation | None = None
-        self._result: Decision | None = None
-        self._busy = False
-        self._stopped = False
-        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
-        self._thread.start()
-
-    def submit(self, obs: Observation) -> bool:
-        """Start solving ``obs``; False (nothing started) while the previous job still runs."""
-        with self._cond:
-            if self._busy or self._stopped:
-                return False
-            self._job, self._result, self._busy = obs, None, True
-            self._cond.notify_all()
-            return True
-
-    def take(self) -> Decision | None:
-        """The finished result, once (None while running or when nothing was submitted)."""
-        with self._cond:
-            result, self._result = self._result, None
-            return result
-
-    @property
-    def busy(self) -> bool:
-        with self._cond:
-            return self._busy
-
-    def wait_idle(self, timeout: float) -> bool:
-        """Wait up to ``timeout`` [s] until no job runs; True if idle."""
-        with self._cond:
-            return self._cond.wait_for(lambda: not self._busy, timeout)
-
-    def stop(self, timeout: float = 1.0) -> None:
-        """Stop the thread (a job in flight is allowed to finish within ``timeout``)."""
-        with self._cond:
-            self._stopped = True
-            self._cond.notify_all()
-        self._thread.join(timeout)
-
-    def _loop(self) -> None:
-        while True:
-            with self._cond:
-                while self._job is None and not self._stopped:
-                    self._cond.wait()
-                if self._stopped:
-                    return
-                job, self._job = self._job, None
-            assert job is not None
-            result = self._solve(job)
-            with self._cond:
-                self._result, self._busy = result, False
-                self._cond.notify_all()
-
-
-# ----------------------------------------------------------------------------- the controller
 @dataclass
 class Counters:
     """Running totals reported with every status message."""
@@ -498,14 +272,14 @@ class ArmController:
         if expected is not None and result is not None and result.tick == expected.tick:
             return replace(result, late_solve_time=late_time, late_tick=late_tick)
         if expected is None and self._tick == 0:
-            return Decision(_zeros(dof), "starting", hold=True)
+            return Decision(zeros(dof), "starting", hold=True)
         # The solve due now has not finished (or none could start: the worker was still busy).
         self.counters.deadline_misses += 1
         if expected is not None:
             self._abandoned = expected.tick
         source = expected or current
         late = Decision(
-            _zeros(dof),
+            zeros(dof),
             "deadline_missed",
             fail_safe=True,
             hold=True,
@@ -562,7 +336,7 @@ class ArmController:
             decision = self._failure(obs, exc)
         velocity = self._guard(decision.velocity)
         if velocity is None:
-            velocity = _zeros(self.robot.dof)
+            velocity = zeros(self.robot.dof)
             decision = replace(decision, status="non_finite_command", hold=True, fail_safe=True)
         job_time = time.perf_counter() - start
         solve_time = decision.telemetry.solve_time if decision.telemetry else job_time
@@ -581,7 +355,7 @@ class ArmController:
         )
 
     def _hold(self, status: str) -> Decision:
-        return Decision(_zeros(self.robot.dof), status, hold=True)
+        return Decision(zeros(self.robot.dof), status, hold=True)
 
     def _announces(self) -> bool:
         return hasattr(self.planner, "announcement")
@@ -594,7 +368,7 @@ class ArmController:
     ) -> np.ndarray:
         fail_safe = getattr(self.planner, "fail_safe", None)
         if fail_safe is None:  # planners without a value function: holding still is their safe act
-            return _zeros(self.robot.dof)
+            return zeros(self.robot.dof)
         if bounds is not None:
             return np.asarray(fail_safe(q, peers, bounds), dtype=np.float64)
         return np.asarray(fail_safe(q, peers), dtype=np.float64)
@@ -614,7 +388,7 @@ class ArmController:
         if doubtful and self.settings.stale_policy == "hold":
             # hold, and let a late solve of this tick fall back to holding too: never steer by
             # a stale or untrusted peer state
-            fallback = _zeros(self.robot.dof)
+            fallback = zeros(self.robot.dof)
         else:
             fallback = self._fail_safe_velocity(obs.q_self, obs.peers, bounds)
         with self._fallback_lock:
@@ -638,4 +412,4 @@ class ArmController:
             fallback = self._fallback
         if fallback is not None and fallback[0] == obs.tick:
             return Decision(fallback[1], "failed", fail_safe=True, error=error)
-        return Decision(_zeros(self.robot.dof), "failed", fail_safe=True, hold=True, error=error)
+        return Decision(zeros(self.robot.dof), "failed", fail_safe=True, hold=True, error=error)

@@ -19,7 +19,8 @@ import time
 from pathlib import Path
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_ros.orchestrate import SuiteSettings, format_metrics, run_suite
+from nehmo_ros.suite import format_metrics, run_suite
+from nehmo_ros.suite_settings import SuiteSettings
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,7 +36,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from nehmo_core.eval.render import render_episode
     from nehmo_core.robots import load_cell
-    from nehmo_core.sim.scenarios import generate_scenario_set, save_scenario_set
+    from nehmo_core.sim.scenario_files import save_scenario_set
+    from nehmo_core.sim.scenarios import generate_scenario_set
 
     if args.index < 0:
         raise InvalidValueError("index", "must be >= 0", args.index)

@@ -3,7 +3,9 @@
     python -m nehmo_ros.fault_episodes --count 20 --faults none,silent,teleport \\
         --policies fail_safe,hold,ignore --peer-planner naive --json faults.json
 
-Every arm runs the node's :class:`~nehmo_ros.control.ArmController` (same rules, planners built
+It lives in ``nehmo_ros`` although it imports no ROS package because it measures the node's
+control loop (:mod:`nehmo_ros.control`) and parameters, not the core's planners. Every arm runs
+the node's :class:`~nehmo_ros.control.ArmController` (same rules, planners built
 by the node's :func:`~nehmo_ros.planners.build_planner`) against a
 :class:`~nehmo_core.sim.cell_sim.CellSimulator`, in lock-step: each 40 ms tick every arm
 receives joint states, ticks (the command applied during tick k was planned from tick k − 1's

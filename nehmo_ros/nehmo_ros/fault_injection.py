@@ -1,6 +1,8 @@
 """Solver faults on purpose: the ``arm_planner`` parameter ``fault_injection`` (default off).
 
-For testing the fail-safes of a running node, never for operation: a node with a fault
+It lives in ``nehmo_ros`` although it imports no ROS package because it is a node parameter:
+only the node (and the fault experiments that drive the node's control loop) wraps planners
+this way. For testing the fail-safes of a running node, never for operation: a node with a fault
 injected says so in a WARN line at start and in every status (``fault_injection``). Syntax
 ``KIND[:SECONDS][@CALLS]``; the fault starts at plan call number ``CALLS`` (default 0, the
 first call after the warm-up):

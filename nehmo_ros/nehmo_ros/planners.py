@@ -1,8 +1,8 @@
-"""Build one arm's planner from node parameters, with the evaluation's model registry.
+"""Build one arm's planner from node parameters, with the planning model registry.
 
-The node's ``model`` parameter is the evaluation's value-model source list
-(:mod:`nehmo_core.eval.planners`), so a ROS run and a batch run of the same row use the very
-same pair models:
+The node's ``model`` parameter is a value-model source list for
+:mod:`nehmo_core.planning.models` (the registry the batch runner uses too), so a ROS run and a
+batch run of the same row use the very same pair models:
 
 ``shipped``    the shipped value functions of the cell's robot pairs (variant per planner kind:
                nehmo, nehmo_paper → bc+sym, nehmo_no_sym → bc, opt_deepreach → deepreach);
@@ -12,7 +12,8 @@ same pair models:
 otherwise      ``[KIND=]SOURCE`` items, comma-separated: a training run directory or a
                ``.safetensors`` file.
 
-Naive and reckless planners take no model.
+Naive and reckless planners take no model. This module imports no ROS package; it stays in
+``nehmo_ros`` because it turns the node's parameters into a planner and names them in errors.
 """
 
 from __future__ import annotations
@@ -20,36 +21,14 @@ from __future__ import annotations
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
-from nehmo_core.eval.planners import ModelRegistry, ValueModelSource, parse_value_models
-from nehmo_core.eval.setups import OPT_KINDS
 from nehmo_core.planning.factory import DECENTRALIZED, make_planner
 from nehmo_core.planning.interface import Planner
+from nehmo_core.planning.models import OPT_KINDS, model_registry
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
-__all__ = ["SHIPPED", "build_planner", "model_registry", "model_sources", "warm_up"]
-
-SHIPPED = "shipped"
-
-
-def model_sources(model: str) -> tuple[ValueModelSource, ...]:
-    """The value-model sources the ``model`` parameter names (none for ``shipped``)."""
-    text = model.strip()
-    if text in ("", SHIPPED):
-        return ()
-    items = [item.strip() for item in text.split(",") if item.strip()]
-    if not items:
-        raise InvalidValueError(
-            "model", "must be 'shipped', 'synthetic' or [KIND=]PATH items", model
-        )
-    return parse_value_models(items)
-
-
-def model_registry(model: str) -> ModelRegistry:
-    """The registry for the ``model`` parameter (``shipped``, ``synthetic`` or sources)."""
-    sources = model_sources(model)
-    return ModelRegistry(sources) if sources else ModelRegistry()
+__all__ = ["build_planner", "warm_up"]
 
 
 def build_planner(

@@ -1,4 +1,4 @@
-"""Evaluation (paper § IV, DESIGN.md § 6): scenario sets, the batch episode runner, metrics
+"""Evaluation (paper § IV): scenario sets, the batch episode runner, metrics
 computed from the logs (rosbag2 bags), the ``nehmo evaluate`` command, tables beside the
 paper's, renders.
 
@@ -7,7 +7,8 @@ paper's, renders.
 - :mod:`.episode`: :func:`run_episode` — 25 Hz control, one-tick planning latency, exact
   collision checks at sub-steps, a bag per episode (:mod:`.episode_log`, :mod:`.telemetry`).
 - :mod:`.metrics`: :func:`evaluate_log` (an episode's result from its log) and :func:`aggregate`.
-- :mod:`.planners`: value-model sources and the planners of a row; :mod:`.batch`: process pool.
+- :mod:`.planners`: the planners of a row (value models from
+  :mod:`nehmo_core.planning.models`); :mod:`.batch`: process pool.
 - :mod:`.report`, :mod:`.paper`: JSON and markdown summaries with the paper's numbers.
 - :mod:`.render`: a GIF and a distance plot of an episode, from its log.
 """

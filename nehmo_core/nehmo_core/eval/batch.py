@@ -19,15 +19,11 @@ from typing import Any
 
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.metrics import EpisodeResult, RowMetrics, aggregate, evaluate_log
-from nehmo_core.eval.planners import (
-    ModelRegistry,
-    ValueModelSource,
-    build_planners,
-    unmodelled_peers,
-)
+from nehmo_core.eval.planners import build_planners, unmodelled_peers
 from nehmo_core.eval.setups import OPT_KINDS, get_setup, is_centralized, parse_row, row_slug
 from nehmo_core.logs import remove_bag
 from nehmo_core.planning.interface import Planner
+from nehmo_core.planning.models import ModelRegistry, ValueModelSource
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell

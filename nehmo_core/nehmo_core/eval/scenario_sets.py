@@ -19,14 +19,8 @@ from nehmo_core.eval.setups import SCENARIO_FILTERS, Setup
 from nehmo_core.planning.baselines import NaivePlanner
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.cell_sim import CellSimulator
-from nehmo_core.sim.scenarios import (
-    SAMPLING_REVISION,
-    Scenario,
-    ScenarioSet,
-    generate_scenario_set,
-    load_scenario_set,
-    save_scenario_set,
-)
+from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set
+from nehmo_core.sim.scenarios import SAMPLING_REVISION, Scenario, ScenarioSet, generate_scenario_set
 
 __all__ = ["naive_collides", "scenario_set_for", "scenario_set_path"]
 

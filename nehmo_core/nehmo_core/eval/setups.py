@@ -1,4 +1,4 @@
-"""The evaluation setups of the paper (§ IV, DESIGN.md § 6) and their planner rows.
+"""The evaluation setups of the paper (§ IV) and their planner rows.
 
 A :class:`Setup` names a cell, its time limit, its success rule, the arms whose planning time
 is reported (the centre arm of the three- and five-UR5 cells, like the paper) and an optional
@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.planning.factory import CENTRALIZED, DECENTRALIZED
+from nehmo_core.planning.models import OPT_KINDS
 from nehmo_core.robots import Cell, load_cell
 
 __all__ = [
@@ -35,14 +36,6 @@ __all__ = [
 ]
 
 PLANNER_KINDS = DECENTRALIZED + CENTRALIZED
-OPT_KINDS: dict[str, str] = {
-    "nehmo": "bc+sym",
-    "nehmo_paper": "bc+sym",
-    "nehmo_no_sym": "bc",
-    "opt_deepreach": "deepreach",
-    "nehmo_wrap": "bc+sym",
-}
-"""Planner kinds solving problem Opt, with the value-function variant each row uses."""
 SUCCESS_NORMS = ("l2", "max")
 SCENARIO_FILTERS = ("naive_collides",)
 

@@ -163,7 +163,7 @@ def swapped_distance_value_and_gradient(
     """``(l, ∇_q l)`` of ``l(q) = d(q[n_first:], q[:n_first])`` with ``d`` = ``model``.
 
     ``q`` (n1 + n2,) [rad] holds the model's second arm first (``n_first`` = its joint count),
-    as :class:`~nehmo_core.hjr.arm_pairs.SwappedBoundary` does in torch.
+    as :class:`~nehmo_core.hjr.systems.arm_pairs.SwappedBoundary` does in torch.
     """
     if n_first != model.n2:
         raise InvalidValueError(

@@ -19,7 +19,7 @@ from nehmo_core.geometry.distance_train import (
     evaluate,
     train,
 )
-from nehmo_core.hjr.train import parse_count
+from nehmo_core.hjr.train_cli import parse_count
 
 _GENERATE_OPTIONS = {"n_uniform": "--uniform", "n_boundary": "--boundary"}
 _TRAIN_OPTIONS = {"epochs": "--epochs", "seed": "--seed", "hidden": "--hidden"}

@@ -5,12 +5,15 @@ Time is time-to-go ``τ ∈ [0, T]``: ``V(0, x) = l(x)`` and ``∂V/∂τ − mi
 - :mod:`.systems`: :class:`Air3D`, :class:`TwoLinkPair`, the generic :class:`ArmPairSystem`.
 - :mod:`.networks`: SIREN value networks, variants ``deepreach | bc | bc+sym | exact`` and
   :class:`ValueFunction` (batched ``value(tau, x)`` / ``gradient(tau, x)``, symmetry applied).
-- :mod:`.train`: the training loop and the ``nehmo train`` options; :func:`load_value_function`.
+- :mod:`.train_settings`: :class:`TrainSettings` and its presets; :mod:`.train`: the training
+  loop; :mod:`.model_files`: checkpoints, shipped models, :func:`load_value_function`;
+  :mod:`.train_cli`: the ``nehmo train`` command.
 - :mod:`.ground_truth`: ``hj_reachability`` grid solutions (JAX, imported lazily) and
   :func:`validate`.
 """
 
 from nehmo_core.hjr.ground_truth import GroundTruth, ValidationRow, ground_truth, validate
+from nehmo_core.hjr.model_files import load_value_function
 from nehmo_core.hjr.networks import VARIANTS, NetworkSettings, ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import (
     Air3D,
@@ -21,7 +24,8 @@ from nehmo_core.hjr.systems import (
     make_system,
     register_system,
 )
-from nehmo_core.hjr.train import TrainSettings, load_value_function, train
+from nehmo_core.hjr.train import train
+from nehmo_core.hjr.train_settings import TrainSettings
 
 __all__ = [
     "VARIANTS",

@@ -3,7 +3,7 @@
 The graph reproduces :class:`~nehmo_core.hjr.networks.ValueFunction` for an
 :class:`~nehmo_core.hjr.systems.ArmPairSystem` whose boundary is a
 :class:`~nehmo_core.geometry.distance_model.PairDistanceModel` or a
-:class:`~nehmo_core.hjr.arm_pairs.SwappedBoundary` around one (see :func:`pair_boundary`):
+:class:`~nehmo_core.hjr.systems.arm_pairs.SwappedBoundary` around one (see :func:`pair_boundary`):
 
 1. periodic state coordinates are wrapped to ``(−π, π]`` (the planner's predicted states may
    cross ±π; the torch function expects states in the domain already, where this is the
@@ -31,9 +31,9 @@ from nehmo_core.geometry.distance_casadi import (
     swapped_distance_value_and_gradient,
 )
 from nehmo_core.geometry.distance_model import PairDistanceModel
-from nehmo_core.hjr.arm_pairs import SwappedBoundary
 from nehmo_core.hjr.networks import Siren, ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import ArmPairSystem
+from nehmo_core.hjr.systems.arm_pairs import SwappedBoundary
 
 __all__ = [
     "pair_boundary",
@@ -118,7 +118,7 @@ def pair_boundary(system: object) -> tuple[PairDistanceModel, int | None]:
     """``(distance, n_first)``: the learned distance behind an arm-pair system's ``l(x)``.
 
     ``n_first`` is None when ``l = distance``, and the controlled arm's joint count when ``l`` is
-    a :class:`~nehmo_core.hjr.arm_pairs.SwappedBoundary` (``l(x) = distance(x₂, x₁)``: the
+    a :class:`~nehmo_core.hjr.systems.arm_pairs.SwappedBoundary` (``l(x) = distance(x₂, x₁)``: the
     distance's second arm is the system's first). Anything else raises :class:`NehmoError`.
     """
     name = getattr(system, "name", type(system).__name__)

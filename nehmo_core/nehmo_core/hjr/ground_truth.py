@@ -355,7 +355,7 @@ def add_validate_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run_validate(args: argparse.Namespace) -> int:
     """Run ``nehmo validate`` from parsed arguments; returns the process exit code."""
-    from nehmo_core.hjr.train import load_value_function
+    from nehmo_core.hjr.model_files import load_value_function
 
     if args.threads is not None:
         if args.threads < 1:

@@ -35,6 +35,7 @@ import numpy as np
 from nehmo_core.errors import NehmoError
 from nehmo_core.planning.codegen import _compiler, _cpu, compile_library
 from nehmo_core.planning.opt import OptProblem
+from nehmo_core.planning.qp import qp_step
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots.loader import cache_dir
 
@@ -159,7 +160,7 @@ class NativeLoop:
         lo: np.ndarray,
         hi: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, int]:
-        """One QP through the C path: ``(p, lam, DAQP flag)`` as :func:`.sqp.qp_step`."""
+        """One QP through the C path: ``(p, lam, DAQP flag)`` as :func:`.qp.qp_step`."""
         n, m = len(grad), len(c)
         B, grad, c = (np.array(a, dtype=np.float64, order="C") for a in (B, grad, c))
         J, lo, hi = (np.array(a, dtype=np.float64, order="C") for a in (J, lo, hi))
@@ -366,9 +367,7 @@ class NativeLoop:
 
 
 def _check(native: NativeLoop) -> str | None:
-    """Compare the C QP path with ``daqp.solve`` (via :func:`.sqp.qp_step`); a reason if off."""
-    from nehmo_core.planning.sqp import qp_step
-
+    """Compare the C QP path with ``daqp.solve`` (via :func:`.qp.qp_step`); a reason if off."""
     rng = np.random.default_rng(7)
     for trial in range(12):
         n, m = 6 + trial % 2, 1 + trial % 4

@@ -32,7 +32,7 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -46,74 +46,24 @@ from nehmo_core.planning.interface import (
     goal_error,
     one_joint_vector,
 )
-from nehmo_core.planning.ipopt_solver import IpoptSolver
 from nehmo_core.planning.native import loop
 from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
 from nehmo_core.planning.pair_frame import PairMapping, arm_reach, match_pair
 from nehmo_core.planning.self_clearance import SelfClearance, SelfClearanceRows, project_step
 from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.solvers import OptSolver, SqpSolver, make_solver
 from nehmo_core.planning.speed_bounds import FULL_SPEED, check_bound
-from nehmo_core.planning.sqp import SolveResult, solve_sqp
+from nehmo_core.planning.stall_escape import StallEscape
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots.model import Cell
 
-__all__ = ["NehmoPlanner", "OptSolver", "SqpSolver", "make_solver"]
+__all__ = ["NehmoPlanner"]
 
 
 def _peer_vectors(cell: Cell, arm_id: str, peers: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]:
     """:func:`check_peers`, with one joint vector per peer (no batches)."""
     checked = check_peers(cell, arm_id, peers)
     return {p: one_joint_vector(q, f"peers[{p!r}]") for p, q in checked.items()}
-
-
-class OptSolver(Protocol):
-    """Solves one Opt problem from a warm start before ``deadline`` (a perf_counter instant)."""
-
-    def __call__(
-        self,
-        problem: OptProblem,
-        y_start: np.ndarray,
-        deadline: float,
-        hessian: np.ndarray | None = None,
-    ) -> SolveResult: ...
-
-
-@dataclass(frozen=True)
-class SqpSolver:
-    """:func:`solve_sqp` with fixed tolerance, iteration limit, screening margin and loop
-    (by default those of :class:`PlannerSettings`)."""
-
-    tol: float = PlannerSettings.sqp_tol
-    max_iter: int = PlannerSettings.sqp_max_iter
-    screen: float | None = PlannerSettings.sqp_screen
-    native: bool = PlannerSettings.sqp_native
-
-    def __call__(
-        self,
-        problem: OptProblem,
-        y_start: np.ndarray,
-        deadline: float,
-        hessian: np.ndarray | None = None,
-    ) -> SolveResult:
-        return solve_sqp(
-            problem,
-            y_start,
-            self.tol,
-            self.max_iter,
-            deadline,
-            hessian,
-            screen=self.screen,
-            native=self.native,
-        )
-
-
-def make_solver(settings: PlannerSettings) -> OptSolver:
-    """The solver named by ``settings.solver``."""
-    if settings.solver == "ipopt":
-        return IpoptSolver(settings.ipopt_tol, settings.ipopt_max_iter, settings.deadline).solve
-    return SqpSolver(
-        settings.sqp_tol, settings.sqp_max_iter, settings.sqp_screen, settings.sqp_native
-    )
 
 
 @dataclass(frozen=True)
@@ -136,7 +86,7 @@ class _Peers:
         ]
 
 
-class NehmoPlanner:
+class NehmoPlanner(StallEscape):
     """NeHMO (or Opt + any pair value model) for arm ``arm_id`` of ``cell``."""
 
     def __init__(
@@ -235,18 +185,6 @@ class NehmoPlanner:
         self._rng = np.random.default_rng(seed)
         self._clear_stall()
 
-    def _clear_stall(self) -> None:
-        """Forget the stall and escape state (on reset() and whenever the goal changes; the
-        warm start, Hessian estimate and random stream are kept)."""
-        self._goal: np.ndarray | None = None  # the goal the stall state was gathered toward
-        self._stall = 0  # consecutive calls without progress against an active V row
-        self._escapes = 0  # escapes since the goal error last reached a new low
-        self._escape_left = 0  # calls left in the current escape
-        self._escape_dir = np.zeros(self.robot.dof)
-        self._yielding = False  # the current escape gives way at the goal
-        self._last_error = math.inf
-        self._best_error = math.inf
-
     # -- announced speed bound ---------------------------------------------------------------
     def _announce(
         self,
@@ -301,54 +239,6 @@ class NehmoPlanner:
             p: check_bound(given[p], f"peer_bounds[{p!r}]") if p in given else FULL_SPEED
             for p in self.pairs
         }
-
-    # -- stall escape -------------------------------------------------------------------------
-    def _escape_error(self, now: _Peers) -> np.ndarray:
-        """The stand-in for ``e₀`` while escaping: minus a full-speed target step, along the
-        escape direction projected onto the tangent space of the critical pair's level set of V
-        (a stalled arm), or straight up V's gradient (an arm yielding its goal)."""
-        g = now.grads[int(np.argmin(now.values))][: self.robot.dof]
-        if self._yielding:
-            d = g
-        else:
-            d = self._escape_dir
-            gg = float(g @ g)
-            if gg > 1e-12:
-                d = d - (d @ g) / gg * g
-        peak = float(np.abs(d).max())
-        if peak < 1e-9:
-            return np.zeros(self.robot.dof)
-        return -(self.settings.t_plan * self.settings.u_max / peak) * d
-
-    def _track_stall(self, error0: np.ndarray, pressed: bool) -> None:
-        """Count calls without progress while a V row is active; start an escape (away from
-        the goal) or a yield (at the goal) after ``stall_ticks`` of them."""
-        s = self.settings
-        e = float(np.linalg.norm(error0))
-        step = s.t_plan * s.u_max
-        progressed = self._last_error - e > s.stall_progress * step
-        self._last_error = e
-        if self._best_error - e > s.stall_progress * step:
-            # closer than ever before: a stall from here on is a new trap, not the same one
-            self._best_error = e
-            self._escapes = 0
-        if self._escape_left > 0:
-            self._escape_left -= 1
-            return
-        if not pressed or (progressed and e >= step):
-            self._stall = 0
-            return
-        self._stall += 1
-        if self._stall < s.stall_ticks:
-            return
-        self._stall = 0
-        self._yielding = e < step
-        if self._yielding:
-            self._escape_left = s.yield_ticks
-        else:
-            self._escapes += 1
-            self._escape_left = s.escape_ticks * min(2 ** (self._escapes - 1), 4)
-            self._escape_dir = self._rng.standard_normal(self.robot.dof)
 
     # -- one tick -----------------------------------------------------------------------------
     def _current(

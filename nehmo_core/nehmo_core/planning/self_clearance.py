@@ -25,6 +25,7 @@ import pybullet as pb
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.planning.qp import qp_step
 from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel
 
 __all__ = ["SelfClearance", "SelfClearanceRows", "project_step"]
@@ -62,8 +63,6 @@ def project_step(target: np.ndarray, rows: SelfClearanceRows, y_max: float) -> n
     target = np.clip(target, -y_max, y_max)
     if rows.count == 0 or rows.satisfied(target):
         return target
-    from nehmo_core.planning.sqp import qp_step
-
     n = len(target)
     step = qp_step(
         2.0 * np.eye(n), -2.0 * target, -rows.b, rows.A, np.full(n, -y_max), np.full(n, y_max)

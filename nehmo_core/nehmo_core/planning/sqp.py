@@ -21,11 +21,11 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 
-import daqp
 import numpy as np
 
 from nehmo_core.planning.native import loop
 from nehmo_core.planning.opt import OptProblem
+from nehmo_core.planning.qp import QPStep, qp_step
 from nehmo_core.planning.settings import PlannerSettings
 
 __all__ = ["QPStep", "SolveResult", "qp_step", "solve_sqp"]
@@ -44,38 +44,6 @@ class SolveResult:
     @property
     def success(self) -> bool:
         return self.status in ("naive", "optimal")
-
-
-@dataclass(frozen=True)
-class QPStep:
-    """The SQP's QP subproblem answer: step ``p``, multipliers of ``c + Jp ≥ 0``, DAQP's flag."""
-
-    p: np.ndarray
-    lam: np.ndarray  # ≥ 0, one per linearized constraint
-    flag: int  # DAQP exit flag: 1 optimal, -1 infeasible, other < 0 solver trouble
-
-    @property
-    def feasible(self) -> bool:
-        return self.flag >= 1
-
-
-def qp_step(
-    B: np.ndarray, grad: np.ndarray, c: np.ndarray, J: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> QPStep:
-    """``min ½pᵀBp + gradᵀp s.t. c + Jp ≥ 0, lo ≤ p ≤ hi`` by DAQP's dual active-set method.
-
-    DAQP solves small dense QPs exactly (up to rounding) and treats the step box as simple
-    bounds. ``B`` must be positive definite; the SQP keeps it so by damped BFGS.
-    """
-    n, m = len(grad), len(c)
-    upper = np.empty(n + m)
-    lower = np.empty(n + m)
-    upper[:n], upper[n:] = hi, np.inf
-    lower[:n], lower[n:] = lo, -c
-    p, _, flag, info = daqp.solve(B, grad, J, upper, lower)
-    # DAQP's multipliers satisfy Bp + grad + [I; J]ᵀ lam = 0 with lam ≤ 0 on active lower bounds
-    lam = np.maximum(0.0, -np.asarray(info["lam"], dtype=np.float64)[n:])
-    return QPStep(np.asarray(p, dtype=np.float64), lam, int(flag))
 
 
 def _c_status(status: str, flag: int) -> str:

@@ -1,10 +1,10 @@
-"""The 12-D arm-pair HJI systems: UR5-UR5 and UR5-Kinova Gen3 (6-DoF).
+"""The shipped 12-D arm-pair HJI systems: UR5-UR5 and UR5-Kinova Gen3 (6-DoF).
 
 Boundary ``l(x)``: the shipped learned distance of the pair (frozen). Symmetry: the mirror
 joint maps of both robots (``geometry.symmetry``), which leave ``l`` unchanged by construction.
 ``X_train``: joint 1 of arm 2 within [−π/2, π/2]; the map sends it to the other half because
-both robots' joint-1 maps are ``q → π − q``. Importing this module registers both systems
-with :func:`nehmo_core.hjr.systems.make_system`.
+both robots' joint-1 maps are ``q → π − q``. :func:`nehmo_core.hjr.systems.make_system`
+builds them by name (:mod:`.registry` lists them).
 """
 
 from __future__ import annotations
@@ -15,9 +15,10 @@ import torch
 from nehmo_core.geometry.distance_data import pair_cell
 from nehmo_core.geometry.distance_model import load_distance_model
 from nehmo_core.geometry.symmetry import robot_mirror_map
-from nehmo_core.hjr.systems import ArmPairSystem, JointInterval, register_system
+from nehmo_core.hjr.systems.arm_pair import ArmPairSystem, JointInterval
+from nehmo_core.hjr.systems.registry import ARM_PAIR_NAMES
 
-ARM_PAIRS = ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite", "ur5_kinova", "kinova_ur5")
+ARM_PAIRS = ARM_PAIR_NAMES
 
 
 class SwappedBoundary(torch.nn.Module):
@@ -72,7 +73,3 @@ def _kinova_ur5_system() -> ArmPairSystem:
         train_region=JointInterval(joint=kinova.dof, low=-np.pi / 2, high=np.pi / 2),
         system_name="kinova_ur5",
     )
-
-
-for _pair in ARM_PAIRS:
-    register_system(_pair, lambda p=_pair: make_arm_pair_system(p))  # type: ignore[misc]

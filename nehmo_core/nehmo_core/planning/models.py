@@ -1,0 +1,327 @@
+"""The pair value-model registry: which trained models back each Opt planner kind.
+
+Used by the batch runner (:mod:`nehmo_core.eval.batch`), the planner node and the benches, so
+every one of them loads the very same models for a row. Value models come from *sources*,
+given as ``[KIND=]SOURCE``:
+
+* ``SOURCE`` is a shipped pair name (``ur5_ur5``, ``ur5_kinova``, ``kinova_ur5``: the variant
+  is the row's, per :data:`OPT_KINDS`), a training run directory (its
+  model, or its latest checkpoint) or a ``.safetensors`` file, or ``synthetic``: random-weight
+  stand-ins from :mod:`nehmo_core.planning.synthetic` (for smoke runs only; their numbers mean
+  nothing).
+* ``KIND=`` limits a source to one planner kind (``nehmo_no_sym=runs/ur5_ur5_bc``); a source
+  without it serves every Opt kind whose variant it matches.
+* Without a source for a kind, the shipped models of the cell's robot pairs are used
+  (:data:`SHIPPED_PAIRS`): in the UR5-Kinova cell, ``ur5_kinova`` for the UR5 and
+  ``kinova_ur5`` (the Kinova-controls game) for the Kinova; for two UR5s, ``ur5_ur5`` (bases
+  0.6 m apart) and, where the row's variant is shipped for it, ``ur5_ur5_diag`` (0.849 m, the
+  diagonal neighbours of the five-UR5 cell) and ``ur5_ur5_opposite`` (1.2 m, the outer arms
+  facing each other across the centre arm in the three- and five-UR5 cells). Each peer uses the
+  model whose base distance matches (:func:`~nehmo_core.planning.pair_frame.match_pair`).
+
+"""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+
+from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError
+from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS, load_value_function
+from nehmo_core.planning.pair_frame import inverse_pose, match_pair, pose_from_matrix, relative_pose
+from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.robots.model import Cell, Pose
+
+__all__ = [
+    "OPT_KINDS",
+    "SHIPPED",
+    "SHIPPED_PAIRS",
+    "SYNTHETIC",
+    "ModelRegistry",
+    "ValueModelSource",
+    "model_registry",
+    "model_sources",
+    "pair_geometry",
+    "parse_value_models",
+    "snapshot_value_models",
+    "swapped_pair_model",
+]
+
+OPT_KINDS: dict[str, str] = {
+    "nehmo": "bc+sym",
+    "nehmo_paper": "bc+sym",
+    "nehmo_no_sym": "bc",
+    "opt_deepreach": "deepreach",
+    "nehmo_wrap": "bc+sym",
+}
+"""Planner kinds solving problem Opt, with the value-function variant each row uses."""
+SHIPPED = "shipped"
+"""The ``model`` text naming the shipped value functions of the cell's robot pairs."""
+SYNTHETIC = "synthetic"
+_SYNTHETIC_PAIRS = {("ur5", "ur5"): "ur5_ur5", ("ur5", "kinova_gen3_6dof"): "ur5_kinova"}
+"""(controlled robot, other robot) → pair with a synthetic stand-in (a learned-distance cell)."""
+SHIPPED_PAIRS: dict[tuple[str, str], tuple[str, ...]] = {
+    ("ur5", "ur5"): ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite"),
+    ("ur5", "kinova_gen3_6dof"): ("ur5_kinova",),
+    ("kinova_gen3_6dof", "ur5"): ("kinova_ur5",),
+}
+"""(controlled robot, other robot) → the shipped value functions of that game, one per base
+distance. The first is required for every Opt kind; the others serve the kinds whose variant
+they ship (a peer at their distance is otherwise reported as unconstrained)."""
+
+
+@dataclass(frozen=True)
+class ValueModelSource:
+    """Where pair value models come from, for one Opt kind (``kind``) or every one (None)."""
+
+    source: str
+    kind: str | None = None
+
+    def __str__(self) -> str:
+        return self.source if self.kind is None else f"{self.kind}={self.source}"
+
+
+def parse_value_models(items: Sequence[str]) -> tuple[ValueModelSource, ...]:
+    """Parse ``[KIND=]SOURCE`` strings (see the module docstring)."""
+    out = []
+    for item in items:
+        head, sep, tail = item.partition("=")
+        if sep and head in OPT_KINDS:
+            out.append(ValueModelSource(tail, head))
+        elif sep and "/" not in head and "." not in head:
+            raise InvalidValueError(
+                "value model", f"must be [KIND=]SOURCE with KIND in {sorted(OPT_KINDS)}", item
+            )
+        else:
+            out.append(ValueModelSource(item))
+        if not out[-1].source:
+            raise InvalidValueError("value model", "must name a source after '='", item)
+    return tuple(out)
+
+
+def _weights_file(source: Path) -> Path:
+    """The weights a path source loads (as :func:`load_value_function` does)."""
+    if source.is_dir():
+        model = source / "model.safetensors"
+        return model if model.exists() else source / "checkpoint.safetensors"
+    return source
+
+
+def snapshot_value_models(
+    sources: Sequence[ValueModelSource], directory: str | Path
+) -> tuple[ValueModelSource, ...]:
+    """Copy every path source's weights (and JSON sidecar) under ``directory``.
+
+    A training run rewrites its checkpoint in place; evaluating a snapshot makes every worker
+    (and every later re-run) use the same weights. Shipped names and ``synthetic`` pass through.
+    """
+    out = []
+    for s in sources:
+        if s.source == SYNTHETIC or s.source in SHIPPED_VALUE_FUNCTIONS:
+            out.append(s)
+            continue
+        src = _weights_file(Path(s.source))
+        if not src.is_file():
+            raise ModelFileError(f"value model {s.source!r}: no weights file {src}")
+        digest = hashlib.sha256(src.read_bytes()).hexdigest()[:12]
+        dest = Path(directory) / f"{Path(s.source).name}_{digest}" / src.name
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        sidecar = src.with_suffix(".json")
+        if sidecar.exists():
+            shutil.copy2(sidecar, dest.with_suffix(".json"))
+        shutil.copy2(src, dest)
+        out.append(ValueModelSource(str(dest), s.kind))
+    return tuple(out)
+
+
+def robot_pairs(cell: Cell) -> list[tuple[str, str]]:
+    """Ordered (own robot, peer robot) pairs of the cell's arms, without repeats."""
+    pairs = []
+    for own in cell.arms:
+        for peer in cell.arms:
+            key = (own.robot.name, peer.robot.name)
+            if own.arm_id != peer.arm_id and key not in pairs:
+                pairs.append(key)
+    return pairs
+
+
+def swapped_pair_model(model: PairValueModel, name: str) -> PairValueModel:
+    """``model`` seen from its second robot: ``V'(τ, q², q¹) = V(τ, q¹, q²)``.
+
+    The roles of the players are swapped too (the controlled arm becomes the disturbance), so
+    this is NOT the value function of the swapped game. It serves synthetic stand-ins, whose
+    ``V`` is the symmetric distance plus a small residual; trained models of the swapped game
+    are separate (``kinova_ur5``).
+    """
+    n1, n2 = model.n1, model.n2
+    tau = ca.MX.sym("tau")
+    x = ca.MX.sym("x", n1 + n2)
+    original = ca.vertcat(x[n2:], x[:n2])
+    v = model.value(tau, original)
+    v2, g = model.value_grad(tau, original)
+    grad = ca.vertcat(g[n1:], g[:n1])
+    return PairValueModel(
+        name=name,
+        robot1=model.robot2,
+        robot2=model.robot1,
+        base2=inverse_pose(model.base2),
+        n1=n2,
+        n2=n1,
+        horizon=model.horizon,
+        value=ca.Function(name, [tau, x], [v], ["tau", "x"], ["v"]),
+        value_grad=ca.Function(f"{name}_grad", [tau, x], [v2, grad], ["tau", "x"], ["v", "grad"]),
+        backend=model.backend,
+    )
+
+
+class ModelRegistry:
+    """Builds and caches the pair value models of each Opt kind (one registry per process)."""
+
+    def __init__(self, sources: Sequence[ValueModelSource] = (), backend: str = "auto") -> None:
+        for s in sources:
+            if s.kind is not None and s.kind not in OPT_KINDS:
+                raise InvalidValueError("kind", f"must be one of {sorted(OPT_KINDS)}", s.kind)
+        self.sources = tuple(sources)
+        self.backend = backend
+        self._cache: dict[tuple[str, str, tuple[tuple[str, str], ...]], list[PairValueModel]] = {}
+        self.described: dict[str, list[dict[str, Any]]] = {}
+
+    def sources_for(self, kind: str, cell: Cell) -> list[str]:
+        """The sources serving ``kind`` on ``cell`` (explicit ones first, else the shipped)."""
+        scoped = [s.source for s in self.sources if s.kind == kind]
+        if scoped:
+            return scoped
+        general = [s.source for s in self.sources if s.kind is None]
+        if general:
+            return general
+        variant = OPT_KINDS[kind]
+        out: list[str] = []
+        for pair in robot_pairs(cell):
+            names = SHIPPED_PAIRS.get(pair, ())
+            out.extend(
+                name
+                for i, name in enumerate(names)
+                if i == 0 or (variant in SHIPPED_VALUE_FUNCTIONS[name] and _cell_uses(name, cell))
+            )
+        return out
+
+    def models_for(self, kind: str, cell: Cell) -> list[PairValueModel]:
+        """Every pair model the ``kind`` planners of ``cell`` use."""
+        if kind not in OPT_KINDS:
+            raise InvalidValueError("kind", f"must be one of {sorted(OPT_KINDS)}", kind)
+        out: list[PairValueModel] = []
+        pairs = tuple(robot_pairs(cell))
+        for source in self.sources_for(kind, cell):
+            key = (kind, source, pairs)
+            if key not in self._cache:
+                self._cache[key] = self._load(kind, source, pairs)
+            out.extend(self._cache[key])
+        self.described[kind] = [
+            {"name": m.name, "robots": [m.robot1, m.robot2], "backend": m.backend} for m in out
+        ]
+        return out
+
+    def _load(
+        self, kind: str, source: str, pairs: tuple[tuple[str, str], ...]
+    ) -> list[PairValueModel]:
+        variant = OPT_KINDS[kind]
+        slug = variant.replace("+", "_")
+        if source == SYNTHETIC:
+            return self._synthetic(variant, pairs)
+        if source in SHIPPED_VALUE_FUNCTIONS:
+            try:
+                vf = load_value_function(source, variant=variant)
+            except (ModelFileError, NehmoError, FileNotFoundError) as exc:
+                raise ModelFileError(
+                    f"row {kind!r} needs the shipped {variant} value function of {source!r}, "
+                    f"which is not available ({exc}); pass --value-model {kind}=PATH "
+                    f"(a run directory) or --value-model synthetic for a smoke run"
+                ) from None
+        else:
+            vf = load_value_function(Path(source))
+            if vf.variant != variant:
+                raise InvalidValueError(
+                    "value model",
+                    f"for row {kind!r} must be a {variant} model ({Path(source).name} is "
+                    f"{vf.variant}); scope it with {_kind_for(vf.variant)}=PATH",
+                    source,
+                )
+        name = f"{kind}_{Path(source).name}_{slug}".replace(".", "_").replace("-", "_")
+        return [PairValueModel.from_value_function(vf, name, backend=self.backend)]
+
+    def _synthetic(self, variant: str, pairs: tuple[tuple[str, str], ...]) -> list[PairValueModel]:
+        from nehmo_core.planning.synthetic import random_value_function
+
+        slug = variant.replace("+", "_")
+        made: dict[tuple[str, str], PairValueModel] = {}
+        for pair in pairs:
+            forward = _SYNTHETIC_PAIRS.get(pair)
+            backward = _SYNTHETIC_PAIRS.get((pair[1], pair[0]))
+            if forward is not None:
+                vf = random_value_function(forward, variant)
+                made[pair] = PairValueModel.from_value_function(
+                    vf, f"synthetic_{forward}_{slug}", backend=self.backend
+                )
+            elif backward is not None:
+                if (pair[1], pair[0]) not in made:
+                    vf = random_value_function(backward, variant)
+                    made[(pair[1], pair[0])] = PairValueModel.from_value_function(
+                        vf, f"synthetic_{backward}_{slug}", backend=self.backend
+                    )
+                made[pair] = swapped_pair_model(
+                    made[(pair[1], pair[0])], f"synthetic_{backward}_{slug}_swapped"
+                )
+        return [made[p] for p in pairs if p in made]
+
+
+def pair_geometry(pair: str) -> tuple[str, str, Pose]:
+    """``(robot 1, robot 2, base of arm 2 in arm 1's frame)`` of a named arm pair: what
+    :func:`~nehmo_core.planning.pair_frame.match_pair` takes per model."""
+    from nehmo_core.geometry.distance_data import pair_cell
+
+    model_cell, a, b = pair_cell(pair)
+    arm1, arm2 = model_cell.arm(a), model_cell.arm(b)
+    return arm1.robot.name, arm2.robot.name, pose_from_matrix(relative_pose(arm1.base, arm2.base))
+
+
+def _cell_uses(pair: str, cell: Cell) -> bool:
+    """Whether some (own, peer) pair of ``cell`` maps onto the shipped pair model ``pair``."""
+    model = [pair_geometry(pair)]
+    return any(
+        match_pair(own, peer, model) is not None
+        for own in cell.arms
+        for peer in cell.arms
+        if own.arm_id != peer.arm_id
+    )
+
+
+def _kind_for(variant: str) -> str:
+    return next((k for k, v in OPT_KINDS.items() if v == variant), "KIND")
+
+
+def model_sources(model: str) -> tuple[ValueModelSource, ...]:
+    """The value-model sources a comma-separated text names (none for ``shipped``).
+
+    The text form is what the planner node's ``model`` parameter and the orchestrator take:
+    ``shipped`` (or empty), ``synthetic``, or ``[KIND=]SOURCE`` items separated by commas.
+    """
+    text = model.strip()
+    if text in ("", SHIPPED):
+        return ()
+    items = [item.strip() for item in text.split(",") if item.strip()]
+    if not items:
+        raise InvalidValueError(
+            "model", "must be 'shipped', 'synthetic' or [KIND=]PATH items", model
+        )
+    return parse_value_models(items)
+
+
+def model_registry(model: str) -> ModelRegistry:
+    """The registry for a ``model`` text (``shipped``, ``synthetic`` or sources)."""
+    return ModelRegistry(model_sources(model))

@@ -1,0 +1,70 @@
+"""How the node suite runs: :class:`SuiteSettings`, checked before any process starts."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from nehmo_core.errors import InvalidValueError, UnknownNameError
+
+__all__ = ["SuiteSettings", "check_row_and_model"]
+
+
+@dataclass(frozen=True)
+class SuiteSettings:
+    """How the suite is run (times [s], rates [Hz])."""
+
+    planner: str = "nehmo"  # a row: one kind, or one per arm joined by '/'
+    model: str = "shipped"
+    time_limit: float = 20.0
+    physics_rate: float = 100.0
+    real_time_factor: float = 1.0
+    domain_id: int | None = None
+    startup_timeout: float = 60.0  # [s] for the recorder and the planners to come up
+    stop_timeout: float = 10.0  # [s] after SIGINT before SIGKILL
+    nice: int = 0  # added niceness of the children
+    #: Added niceness of the recorder on top of ``nice``: the planners and the bridge come first
+    #: when the CPUs are busy; the recorder's deep reader history absorbs its delays.
+    recorder_nice: int = 10
+    extra_planner_args: tuple[str, ...] = ()
+    env: dict[str, str] = field(default_factory=dict)
+    #: A colcon install space (``ros_ws/install``): the nodes then run as its executables after
+    #: sourcing its ``setup.bash``, as a ROS user runs them; '' runs ``python -m <module>``.
+    install_space: str = ""
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.recorder_nice <= 19:
+            raise InvalidValueError("recorder_nice", "must lie in [0, 19]", self.recorder_nice)
+        for name in ("time_limit", "physics_rate", "real_time_factor", "startup_timeout"):
+            if not getattr(self, name) > 0:
+                raise InvalidValueError(name, "must be > 0", getattr(self, name))
+        if self.domain_id is not None and not 0 <= self.domain_id <= 232:
+            raise InvalidValueError("domain_id", "must lie in [0, 232]", self.domain_id)
+        check_row_and_model(self.planner, self.model)
+        if self.install_space and not (Path(self.install_space) / "setup.bash").is_file():
+            raise InvalidValueError(
+                "install_space",
+                "must be a colcon install space (with setup.bash)",
+                self.install_space,
+            )
+
+
+def check_row_and_model(planner: str, model: str) -> None:
+    """What every ``arm_planner`` would reject, checked before any process starts: each kind
+    of the row (one, or one per arm joined by '/') and each source of ``model``."""
+    from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS
+    from nehmo_core.planning.factory import DECENTRALIZED
+    from nehmo_core.planning.models import SYNTHETIC, model_sources
+
+    for kind in planner.split("/"):
+        if kind not in DECENTRALIZED:
+            raise UnknownNameError("planner", kind, DECENTRALIZED)
+    for source in model_sources(model):
+        known = source.source in SHIPPED_VALUE_FUNCTIONS or source.source == SYNTHETIC
+        if not known and not Path(source.source).exists():
+            raise InvalidValueError(
+                "model",
+                "must be 'shipped', 'synthetic', a shipped pair "
+                f"{sorted(SHIPPED_VALUE_FUNCTIONS)} or an existing path, per [KIND=]SOURCE item",
+                str(source),
+            )

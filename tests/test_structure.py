@@ -1,0 +1,102 @@
+"""The shape of the source tree: a ROS-free core, no import cycle in planning, small modules."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CORE = ROOT / "nehmo_core" / "nehmo_core"
+PLANNING = CORE / "planning"
+PACKAGES = [CORE, ROOT / "nehmo_ros", ROOT / "sim_bridge"]
+MAX_LINES = 450
+
+_IMPORT_ALL_WITHOUT_ROS = textwrap.dedent(
+    """
+    import importlib, importlib.abc, pkgutil, sys
+
+    BLOCKED = ("rclpy", "nehmo_ros", "sim_bridge", "rosidl", "rosbag2_py", "launch", "ament")
+
+    class NoRos(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path=None, target=None):
+            top = name.split(".")[0]
+            if top in BLOCKED or top.endswith("_msgs") or top.endswith("_interfaces"):
+                raise ImportError(f"{name} is not installed (blocked: the core must not need ROS)")
+            return None
+
+    sys.meta_path.insert(0, NoRos())
+    import nehmo_core
+
+    names = [m.name for m in pkgutil.walk_packages(nehmo_core.__path__, "nehmo_core.")]
+    for name in names:
+        importlib.import_module(name)
+    print(f"imported {len(names)} modules")
+    """
+)
+
+
+def test_every_core_module_imports_without_ros() -> None:
+    out = subprocess.run(
+        [sys.executable, "-c", _IMPORT_ALL_WITHOUT_ROS],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    count = int(out.stdout.split()[1])
+    assert count == len(list(CORE.rglob("*.py"))) - 1  # every module but the package itself
+
+
+def _planning_imports(path: Path) -> set[str]:
+    """Planning modules that ``path`` imports (at any depth in the file)."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        else:
+            continue
+        for name in names:
+            parts = name.split(".")
+            inside = parts[:2] == ["nehmo_core", "planning"] and len(parts) > 2
+            if inside and (PLANNING / f"{parts[2]}.py").exists():
+                out.add(parts[2])
+    return out - {path.stem}
+
+
+def test_planning_modules_import_no_cycle() -> None:
+    graph = {p.stem: _planning_imports(p) for p in PLANNING.glob("*.py") if p.stem != "__init__"}
+    done: set[str] = set()
+
+    def visit(module: str, stack: list[str]) -> None:
+        assert module not in stack, f"import cycle: {' -> '.join([*stack, module])}"
+        if module in done:
+            return
+        for child in sorted(graph[module]):
+            visit(child, [*stack, module])
+        done.add(module)
+
+    for module in sorted(graph):
+        visit(module, [])
+    assert "qp" in graph and graph["qp"] == set()
+
+
+def _sources() -> list[Path]:
+    return sorted(p for root in PACKAGES for p in root.rglob("*.py") if "build" not in p.parts)
+
+
+def test_source_files_are_short_and_say_what_they_hold() -> None:
+    long = {
+        str(p.relative_to(ROOT)): n
+        for p in _sources()
+        if (n := len(p.read_text().splitlines())) > MAX_LINES
+    }
+    assert not long, f"files over {MAX_LINES} lines: {long}"
+    for path in _sources():
+        doc = ast.get_docstring(ast.parse(path.read_text()))
+        assert doc and doc.strip(), f"{path.relative_to(ROOT)} has no module docstring"
