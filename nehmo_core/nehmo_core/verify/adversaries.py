@@ -73,6 +73,14 @@ def _boundary_gradient(system: HJISystem, x: Tensor) -> Tensor:
     return grad
 
 
+def _constant(d: Tensor) -> DisturbanceFn:
+    return lambda step, x, grad: d
+
+
+def _switching(table: list[Tensor], hold: int) -> DisturbanceFn:
+    return lambda step, x, grad: table[(step // hold) % len(table)]
+
+
 def make_adversaries(
     system: HJISystem,
     names: tuple[str, ...],
@@ -96,16 +104,14 @@ def make_adversaries(
             )
         elif name in ("corner+", "corner-"):
             fixed = (hi if name == "corner+" else lo).expand(batch, -1)
-            out.append(Adversary(name, lambda s, x, g, c=fixed: c))
+            out.append(Adversary(name, _constant(fixed)))
         elif name == "corners":
             for i in range(RANDOM_CORNERS):
                 fixed = _random_corners(rng, batch, lo, hi)
-                out.append(Adversary(f"corners[{i}]", lambda s, x, g, c=fixed: c))
+                out.append(Adversary(f"corners[{i}]", _constant(fixed)))
         else:
             hold = max(1, round(SWITCH_PERIOD / dt))
             for i in range(SWITCHING):
                 table = [_random_corners(rng, batch, lo, hi) for _ in range(64)]
-                out.append(
-                    Adversary(f"switching[{i}]", lambda s, x, g, t=table, h=hold: t[(s // h) % 64])
-                )
+                out.append(Adversary(f"switching[{i}]", _switching(table, hold)))
     return out
