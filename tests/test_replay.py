@@ -47,7 +47,8 @@ def test_replay_republishes_every_message_in_order(tmp_path: Path) -> None:
     try:
         assert listener.stdout is not None
         assert "listening" in listener.stdout.readline()
-        replay = _replay(str(bag), "--wait", "2")
+        # discovery before the first message: generous, a busy machine can take seconds
+        replay = _replay(str(bag), "--wait", "10")
     finally:
         listener.terminate()
         finish(listener, timeout=20)
