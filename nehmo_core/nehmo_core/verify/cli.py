@@ -18,11 +18,16 @@ from pathlib import Path
 
 from nehmo_core.errors import InvalidValueError, as_options
 from nehmo_core.hjr import load_value_function
-from nehmo_core.hjr.systems import ArmPairSystem
+from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
 from nehmo_core.verify.adversaries import ADVERSARIES, DEFAULT_ADVERSARIES
 from nehmo_core.verify.cards import record_certificate, shipped_card_path
 from nehmo_core.verify.certify import Certificate, VerifySettings, certify
-from nehmo_core.verify.distributions import UniformBox, episode_logs, visited_pair_states
+from nehmo_core.verify.distributions import (
+    StateDistribution,
+    UniformBox,
+    episode_logs,
+    visited_pair_states,
+)
 from nehmo_core.verify.report import certificate_markdown
 from nehmo_core.verify.truth import exact_margin
 
@@ -76,9 +81,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _distribution(args: argparse.Namespace, system: object) -> UniformBox | object:
+def _distribution(args: argparse.Namespace, system: HJISystem) -> StateDistribution:
     if args.distribution == "uniform":
-        return UniformBox(system)  # type: ignore[arg-type]
+        return UniformBox(system)
     if not args.logs:
         raise InvalidValueError("--logs", "is required with --distribution visited", None)
     if not isinstance(system, ArmPairSystem):
@@ -115,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     margin = exact_margin(value.system)
     variant = args.variant or value.variant
     try:
-        cert = certify(value, margin, distribution, settings, model=f"{args.model} ({variant})")  # type: ignore[arg-type]
+        cert = certify(value, margin, distribution, settings, model=f"{args.model} ({variant})")
     finally:
         margin.close()
     cert.command = "nehmo verify " + shlex.join(

@@ -22,6 +22,7 @@ from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
 from nehmo_core.planning.pair_frame import match_pair, pose_from_matrix, relative_pose
 from nehmo_core.robots.model import Pose, wrap_angle
+from nehmo_core.verify.truth import pair_arms
 
 
 class StateDistribution(Protocol):
@@ -76,11 +77,8 @@ class VisitedStates:
 
 def pair_model_geometry(system: ArmPairSystem) -> tuple[str, str, Pose]:
     """``(robot 1, robot 2, base of arm 2 seen from arm 1)`` of a shipped arm-pair system."""
-    from nehmo_core.geometry.distance_data import pair_cell
-
-    swapped = system.name == "kinova_ur5"
-    cell, a, b = pair_cell("ur5_kinova" if swapped else system.name)
-    arm1, arm2 = (cell.arm(b), cell.arm(a)) if swapped else (cell.arm(a), cell.arm(b))
+    cell, a, b = pair_arms(system.name)
+    arm1, arm2 = cell.arm(a), cell.arm(b)
     pose = pose_from_matrix(relative_pose(arm1.base, arm2.base))
     return arm1.robot.name, arm2.robot.name, pose
 

@@ -15,20 +15,29 @@ import torch
 from nehmo_core.geometry.distance_data import PAIRS, pair_cell
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
+from nehmo_core.robots.model import Cell
 
 ExactMargin = Callable[[np.ndarray, float], np.ndarray]
 """``margin(x (B, n) [rad or m], cutoff [m]) -> (B,)`` [m]; values above ``cutoff`` may be
 reported as ``cutoff``."""
 
 
+def pair_arms(name: str) -> tuple[Cell, str, str]:
+    """The cell of a shipped pair system and its arms in the system's order (arm 1, arm 2).
+
+    ``kinova_ur5`` is the UR5-Kinova cell seen from the Kinova's base: the arms swap.
+    """
+    if name == "kinova_ur5":
+        cell, a, b = pair_cell("ur5_kinova")
+        return cell, b, a
+    return pair_cell(name)
+
+
 class PairDistance:
     """Exact signed distance [m] of a shipped arm pair, ``x = (q¹, q²)`` in the system's order."""
 
     def __init__(self, system: ArmPairSystem) -> None:
-        name = system.name
-        swapped = name == "kinova_ur5"  # the UR5-Kinova cell seen from the Kinova's base
-        cell, a, b = pair_cell("ur5_kinova" if swapped else name)
-        self.arm_a, self.arm_b = (b, a) if swapped else (a, b)
+        cell, self.arm_a, self.arm_b = pair_arms(system.name)
         self.n1 = system.n1
         self.world = CellWorld(cell)
 
