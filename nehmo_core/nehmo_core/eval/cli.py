@@ -7,11 +7,17 @@ writes ``DIR/scenarios/<setup>_seed<seed>.json`` (the scenario set ``--seed`` se
 ``DIR/logs/<row>/episode_<i>/`` (one rosbag2 bag per episode), ``DIR/summary.json`` and
 ``DIR/summary.md`` (our numbers with the paper's beside them), and with ``--render`` a GIF and a
 distance plot of the first episode of every row under ``DIR/renders/``.
+
+    nehmo evaluate --tasks ../shared/ha_benchmark/tasks --planners nehmo,naive,ompl --out OUT
+
+runs Ha et al.'s task files instead (:mod:`nehmo_core.eval.task_runner`): ``OUT/summary.json``
+adds ``rows[].by_arms``, the metrics per arm count.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -30,7 +36,15 @@ __all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--setup", required=True, choices=sorted(SETUPS), help="evaluation setup")
+    where = parser.add_mutually_exclusive_group(required=True)
+    where.add_argument("--setup", choices=sorted(SETUPS), help="evaluation setup")
+    where.add_argument(
+        "--tasks",
+        type=Path,
+        metavar="DIR",
+        help="a directory of Ha et al.'s task JSON files (each its own cell; --episodes and "
+        "--seed do not apply)",
+    )
     parser.add_argument(
         "--planners",
         default="nehmo,naive",
@@ -133,6 +147,37 @@ def _scenarios(args: argparse.Namespace) -> ScenarioSet:
     return made
 
 
+def _run_tasks(args: argparse.Namespace, rows: list[str], settings: PlannerSettings) -> int:
+    from nehmo_core.eval.ha_tasks import load_tasks
+    from nehmo_core.eval.task_runner import TaskConfig, markdown, run_tasks
+
+    tasks = load_tasks(args.tasks)
+    config = TaskConfig(
+        out_dir=args.out,
+        value_models=snapshot_value_models(
+            parse_value_models(args.value_model), args.out / "value_models"
+        ),
+        backend=args.backend,
+        planner_settings=settings,
+    )
+
+    def report(row: dict[str, object]) -> None:
+        ours: dict[str, float] = row["ours"]  # type: ignore[assignment]
+        print(
+            f"tasks {row['row']}: SR {ours['sr']:.0f}% CR {ours['cr_inter_arm']:.0f}% "
+            f"stuck {ours['stuck_rate']:.0f}%",
+            file=sys.stderr,
+        )
+
+    summary = run_tasks(config, rows, tasks, args.workers, not args.no_progress, report)
+    path = args.out / "summary.json"
+    path.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
+    path.with_suffix(".md").write_text(markdown(summary))
+    print(markdown(summary))
+    print(f"wrote {path} and {path.with_suffix('.md')}", file=sys.stderr)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise InvalidValueError("--episodes", "must be >= 1", args.episodes)
@@ -141,11 +186,12 @@ def run(args: argparse.Namespace) -> int:
     rows = [r.strip() for r in args.planners.split(",") if r.strip()]
     if not rows:
         raise InvalidValueError("--planners", "must name at least one row", args.planners)
-    cell = get_setup(args.setup).load_cell()
-    for row in rows:  # fail before any work on a bad row
-        parse_row(row, cell)
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise InvalidValueError("--out", "must be a directory (it is a file)", str(args.out))
+    if args.setup is not None:
+        cell = get_setup(args.setup).load_cell()
+        for row in rows:  # fail before any work on a bad row
+            parse_row(row, cell)
     planner_settings = PlannerSettings()
     if args.deadline is not None:
         planner_settings = planner_settings.replace(deadline=args.deadline)
@@ -157,6 +203,8 @@ def run(args: argparse.Namespace) -> int:
         planner_settings = planner_settings.replace(escape=False)
     if args.planner_setting:
         planner_settings = planner_settings.replace(**parse_settings(args.planner_setting))
+    if args.tasks is not None:
+        return _run_tasks(args, rows, planner_settings)
     config = BatchConfig(
         setup=args.setup,
         out_dir=args.out,

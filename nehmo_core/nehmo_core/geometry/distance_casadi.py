@@ -77,8 +77,11 @@ def keypoints_expression(keypoints: nn.Module, q: ca.MX) -> ca.MX:
 
 def features_expression(model: PairDistanceModel, q: ca.MX) -> ca.MX:
     """Raw features (F,): pairwise keypoint distances (row-major) [m] and their soft minima."""
+    n = model.n1 + model.n2
     p1 = keypoints_expression(model.kp1, q[: model.n1])  # (3, P)
-    p2 = keypoints_expression(model.kp2, q[model.n1 :])  # (3, Q)
+    p2 = keypoints_expression(model.kp2, q[model.n1 : n])  # (3, Q)
+    if model.n_cond:  # conditioned: arm 2's base shifted by r along x
+        p2 = p2 + ca.repmat(ca.vertcat(q[n], 0.0, 0.0), 1, p2.shape[1])
     n_p, n_q = p1.shape[1], p2.shape[1]
     # |a − b|² = |a|² + |b|² − 2 a·b, clamped at 1e-12 m², exactly as the torch model computes it
     # (a feature with a tiny standard deviation amplifies any other rounding of it).
@@ -90,7 +93,8 @@ def features_expression(model: PairDistanceModel, q: ca.MX) -> ca.MX:
         lowest - ca.log(ca.sum2(ca.exp(-beta * (dist - lowest)))) / beta
         for beta in model.config.softmin_betas
     ]
-    return ca.vertcat(dist.T, *soft)
+    extra = [q[n:]] if model.n_cond else []
+    return ca.vertcat(dist.T, *soft, *extra)
 
 
 def _dense_row(h: ca.MX, layer: nn.Linear) -> ca.MX:

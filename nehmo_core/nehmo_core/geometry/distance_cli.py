@@ -11,7 +11,13 @@ import numpy as np
 import torch
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, as_options
-from nehmo_core.geometry.distance_data import PAIRS, DatasetSpec, generate
+from nehmo_core.geometry.distance_data import (
+    BASE_RANGE,
+    CONDITIONED_PAIRS,
+    PAIRS,
+    DatasetSpec,
+    generate,
+)
 from nehmo_core.geometry.distance_model import MODELS_DIR, load_distance_file
 from nehmo_core.geometry.distance_train import (
     DistanceTrainSettings,
@@ -21,6 +27,7 @@ from nehmo_core.geometry.distance_train import (
 )
 from nehmo_core.hjr.train_cli import parse_count
 
+ALL_PAIRS = sorted([*PAIRS, *CONDITIONED_PAIRS])
 _GENERATE_OPTIONS = {"n_uniform": "--uniform", "n_boundary": "--boundary"}
 _TRAIN_OPTIONS = {"epochs": "--epochs", "seed": "--seed", "hidden": "--hidden"}
 
@@ -28,14 +35,14 @@ _TRAIN_OPTIONS = {"epochs": "--epochs", "seed": "--seed", "hidden": "--hidden"}
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", required=True)
     g = sub.add_parser("generate", help="sample joint pairs and label them with exact distances")
-    g.add_argument("--pair", choices=sorted(PAIRS), required=True)
+    g.add_argument("--pair", choices=ALL_PAIRS, required=True)
     g.add_argument("--uniform", default="300k", help="uniform samples (e.g. 300k, 0: none)")
     g.add_argument("--boundary", default="500k", help="near-contact samples (e.g. 500k, 0: none)")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--workers", type=int, default=2)
     g.add_argument("--out", type=Path, required=True, help="output .npz file")
     t = sub.add_parser("train", help="fit a distance model on a generated dataset")
-    t.add_argument("--pair", choices=sorted(PAIRS), required=True)
+    t.add_argument("--pair", choices=ALL_PAIRS, required=True)
     t.add_argument("--data", type=Path, required=True, help="training .npz from 'generate'")
     t.add_argument("--test", type=Path, help="held-out .npz (fresh seed) to report accuracy on")
     t.add_argument("--hidden", type=str, default="128,128,128", help="hidden widths, e.g. 128,128")
@@ -46,13 +53,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "calibrate",
         help="raise a model's conservative offset so a calibration set meets a false-safe rate",
     )
-    c.add_argument("--pair", choices=sorted(PAIRS), required=True)
+    c.add_argument("--pair", choices=ALL_PAIRS, required=True)
     c.add_argument("--data", type=Path, required=True, help="calibration .npz (not test data)")
     c.add_argument("--test", type=Path, help="held-out .npz to re-report accuracy on")
     c.add_argument("--target", type=float, default=0.015, help="false-safe rate to reach")
     c.add_argument("--model", type=Path, help="model .safetensors (default: the shipped model)")
     e = sub.add_parser("evaluate", help="accuracy of a distance model on a labelled .npz")
-    e.add_argument("--pair", choices=sorted(PAIRS), required=True)
+    e.add_argument("--pair", choices=ALL_PAIRS, required=True)
     e.add_argument("--data", type=Path, required=True)
     e.add_argument("--model", type=Path, help="model .safetensors (default: the shipped model)")
 
@@ -138,7 +145,12 @@ def _train(args: argparse.Namespace) -> int:
     card: dict[str, object] = {
         "pair": args.pair,
         "what": "learned signed distance [m] between the two arms' collision geometry",
-        "inputs": "q = (q_arm1, q_arm2) [rad] in each robot's URDF joint order",
+        "inputs": (
+            "q = (q_arm1, q_arm2, r): joints [rad] in each robot's URDF joint order, arm 2's base "
+            f"at (r, 0, 0) facing arm 1, r in {list(BASE_RANGE)} m"
+            if args.pair in CONDITIONED_PAIRS
+            else "q = (q_arm1, q_arm2) [rad] in each robot's URDF joint order"
+        ),
         "data": {"train": meta, "file": args.data.name},
         "training": {**settings.__dict__, **summary},
     }

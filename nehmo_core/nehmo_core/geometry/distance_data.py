@@ -10,6 +10,7 @@ at ``cutoff`` [m].
 
 from __future__ import annotations
 
+import math
 import multiprocessing as mp
 from dataclasses import dataclass
 
@@ -18,8 +19,8 @@ from tqdm import tqdm
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.robots.loader import load_cell
-from nehmo_core.robots.model import Cell, RobotModel
+from nehmo_core.robots.loader import load_cell, load_robot
+from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel
 
 PAIRS: dict[str, tuple[str, str, str]] = {
     # pair name: (cell, arm 1, arm 2). Arm 1 sits at the origin, arm 2 facing it, 0.6 m away
@@ -30,14 +31,33 @@ PAIRS: dict[str, tuple[str, str, str]] = {
     "ur5_ur5_opposite": ("opposite_ur5", "ur5_0", "ur5_1"),
     "ur5_kinova": ("ur5_kinova", "ur5_0", "kinova_0"),
 }
+CONDITIONED_PAIRS: dict[str, tuple[str, str]] = {
+    # pair name: (robot 1, robot 2). Arm 1 at the origin, arm 2 at (r, 0, 0) facing it, for any
+    # base distance r in BASE_RANGE: the pose-conditioned models (one for every layout).
+    "ur5_ur5_any": ("ur5", "ur5"),
+    "ur5_kinova_any": ("ur5", "kinova_gen3_6dof"),
+}
+BASE_RANGE = (0.25, 1.7)
+"""Base distances [m] the conditioned models are trained on (Ha et al.'s layouts: 0.31-1.60)."""
 CUTOFF = 1.0
 """Distances are resolved up to this value [m]; farther pairs are labelled with it."""
 
 
 def pair_cell(pair: str) -> tuple[Cell, str, str]:
-    """The cell and the two arm ids of a named arm pair."""
+    """The cell and the two arm ids of a named arm pair.
+
+    For a conditioned pair the cell has arm 2 at the origin facing arm 1 (``r = 0``): the
+    canonical frame that the base distance then shifts along x.
+    """
+    if pair in CONDITIONED_PAIRS:
+        r1, r2 = CONDITIONED_PAIRS[pair]
+        arms = (
+            ArmSpec("arm_0", load_robot(r1), Pose()),
+            ArmSpec("arm_1", load_robot(r2), Pose((0.0, 0.0, 0.0), (0.0, 0.0, math.pi))),
+        )
+        return Cell(pair, arms), "arm_0", "arm_1"
     if pair not in PAIRS:
-        raise UnknownNameError("arm pair", pair, PAIRS)
+        raise UnknownNameError("arm pair", pair, [*PAIRS, *CONDITIONED_PAIRS])
     cell_name, a, b = PAIRS[pair]
     return load_cell(cell_name), a, b
 
@@ -59,8 +79,8 @@ class DatasetSpec:
     noise: float = 0.08
 
     def __post_init__(self) -> None:
-        if self.pair not in PAIRS:
-            raise UnknownNameError("arm pair", self.pair, PAIRS)
+        if self.pair not in PAIRS and self.pair not in CONDITIONED_PAIRS:
+            raise UnknownNameError("arm pair", self.pair, [*PAIRS, *CONDITIONED_PAIRS])
         for name in ("n_uniform", "n_boundary"):
             if getattr(self, name) < 0:
                 raise InvalidValueError(name, "must be >= 0", getattr(self, name))
@@ -71,24 +91,54 @@ class DatasetSpec:
 
 
 _WORLD: tuple[CellWorld, str, str] | None = None
+_YAW_SIGNS: tuple[float, float] = (1.0, 1.0)
 
 
 def _init_worker(pair: str) -> None:
-    global _WORLD
+    global _WORLD, _YAW_SIGNS
     cell, a, b = pair_cell(pair)
     _WORLD = (CellWorld(cell), a, b)
+    if pair in CONDITIONED_PAIRS:
+        from nehmo_core.planning.pair_frame import base_yaw_joint
+
+        signs = [base_yaw_joint(cell.arm(x).robot.name) for x in (a, b)]
+        if signs[0] is None or signs[1] is None:
+            raise InvalidValueError(
+                "pair", "a conditioned pair needs arms whose first joint is a base yaw", pair
+            )
+        _YAW_SIGNS = (signs[0], signs[1])
 
 
 def _label(q: np.ndarray) -> np.ndarray:
+    """Exact distances of rows ``(q¹, q²)``, or for a conditioned pair ``(q¹, q², r, α¹, α²)``.
+
+    Conditioned rows are in the canonical frame; they are labelled on a real layout: arm 1 turned
+    by ``α¹`` about its base axis, arm 2 at ``(r, 0, 0)`` turned by ``α²``, and each first joint
+    shifted back by the same angle (the same pose up to the base links' own shapes, which the
+    labels thus carry).
+    """
     assert _WORLD is not None
     world, a, b = _WORLD
     n1 = world.cell.arm(a).robot.dof
+    n2 = world.cell.arm(b).robot.dof
+    conditioned = q.shape[1] == n1 + n2 + 3
     out = np.empty(len(q))
     for i, qi in enumerate(q):
-        world.set_joint_positions(a, qi[:n1])
-        world.set_joint_positions(b, qi[n1:])
+        q1, q2 = qi[:n1].copy(), qi[n1 : n1 + n2].copy()
+        if conditioned:
+            r, yaw1, yaw2 = qi[n1 + n2 :]
+            world.set_base_pose(a, Pose((0.0, 0.0, 0.0), (0.0, 0.0, float(yaw1))))
+            world.set_base_pose(b, Pose((float(r), 0.0, 0.0), (0.0, 0.0, math.pi + float(yaw2))))
+            q1[0] = _wrap(q1[0] - _YAW_SIGNS[0] * yaw1)
+            q2[0] = _wrap(q2[0] - _YAW_SIGNS[1] * yaw2)
+        world.set_joint_positions(a, q1)
+        world.set_joint_positions(b, q2)
         out[i] = world.distance(a, b, CUTOFF)
     return out
+
+
+def _wrap(angle: float) -> float:
+    return float((angle + math.pi) % (2.0 * math.pi) - math.pi)
 
 
 def exact_distances(pair: str, q: np.ndarray, workers: int = 1, desc: str = "") -> np.ndarray:
@@ -105,22 +155,39 @@ def exact_distances(pair: str, q: np.ndarray, workers: int = 1, desc: str = "") 
     return np.concatenate(parts) if parts else np.zeros(0)
 
 
-def uniform_samples(pair: str, n: int, rng: np.random.Generator) -> np.ndarray:
+def pair_box(pair: str) -> tuple[np.ndarray, np.ndarray]:
+    """Sampling bounds of a pair's model input: both arms' joints [rad] (and ``r`` [m])."""
     cell, a, b = pair_cell(pair)
     lo1, hi1 = sampling_box(cell.arm(a).robot)
     lo2, hi2 = sampling_box(cell.arm(b).robot)
     lo, hi = np.concatenate([lo1, lo2]), np.concatenate([hi1, hi2])
+    if pair in CONDITIONED_PAIRS:
+        lo, hi = np.append(lo, BASE_RANGE[0]), np.append(hi, BASE_RANGE[1])
+    return lo, hi
+
+
+def uniform_samples(pair: str, n: int, rng: np.random.Generator) -> np.ndarray:
+    lo, hi = pair_box(pair)
     return rng.uniform(lo, hi, size=(n, len(lo)))
+
+
+def labelled(
+    pair: str, q: np.ndarray, rng: np.random.Generator, workers: int = 1, desc: str = ""
+) -> np.ndarray:
+    """Exact distances (N,) of model inputs ``q``; a conditioned pair's are labelled at random
+    base yaws (see :func:`_label`)."""
+    if pair in CONDITIONED_PAIRS:
+        yaws = rng.uniform(-np.pi, np.pi, size=(len(q), 2))
+        return exact_distances(pair, np.concatenate([q, yaws], axis=1), workers, desc)
+    return exact_distances(pair, q, workers, desc)
 
 
 def generate(spec: DatasetSpec, workers: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """Generate (q (N, n), d (N,)) for ``spec``: uniform samples, then boundary samples."""
     rng = np.random.default_rng(spec.seed)
-    cell, a, b = pair_cell(spec.pair)
-    lo = np.concatenate([sampling_box(cell.arm(x).robot)[0] for x in (a, b)])
-    hi = np.concatenate([sampling_box(cell.arm(x).robot)[1] for x in (a, b)])
+    lo, hi = pair_box(spec.pair)
     q_u = uniform_samples(spec.pair, spec.n_uniform, rng)
-    d_u = exact_distances(spec.pair, q_u, workers, "uniform")
+    d_u = labelled(spec.pair, q_u, rng, workers, "uniform")
     qs, ds = [q_u], [d_u]
     seeds = q_u[np.abs(d_u) < spec.near]
     if spec.n_boundary > 0 and not len(seeds):
@@ -135,7 +202,7 @@ def generate(spec: DatasetSpec, workers: int = 2) -> tuple[np.ndarray, np.ndarra
         n = min(spec.n_boundary - made, 100_000)
         base = seeds[rng.integers(0, len(seeds), n)]
         q_b = np.clip(base + rng.normal(0.0, spec.noise, base.shape), lo, hi)
-        d_b = exact_distances(spec.pair, q_b, workers, "boundary")
+        d_b = labelled(spec.pair, q_b, rng, workers, "boundary")
         qs.append(q_b)
         ds.append(d_b)
         seeds = np.concatenate([seeds, q_b[np.abs(d_b) < spec.near]])

@@ -8,7 +8,11 @@ the pairwise keypoint distances (plus two soft minima of them) to a small SiLU M
 the model periodic in every joint, smooth, cheap, and, because the UR5 symmetry map mirrors
 every joint-frame origin exactly, invariant under that map by construction.
 
-Arm 1 sits at the pair frame's origin, arm 2 at ``base2`` in that frame.
+Arm 1 sits at the pair frame's origin, arm 2 at ``base2`` in that frame. A *pose-conditioned*
+model (``base2_range`` set) takes one more input, the base distance ``r`` [m]: arm 2 then sits
+at ``base2 + (r, 0, 0)``, so ``q = (q¹, q², r)``. Any two arms whose first joints turn them
+about vertical base axes at the same height reduce to that frame (see
+:mod:`nehmo_core.planning.pair_frame`), so one conditioned model serves every layout.
 """
 
 from __future__ import annotations
@@ -79,6 +83,11 @@ class DistanceModelConfig:
     base2_rpy: tuple[float, float, float]
     hidden: tuple[int, ...] = (128, 128, 128)
     softmin_betas: tuple[float, ...] = (20.0, 60.0)
+    base2_range: tuple[float, float] | None = None  # conditioned: r [m] added to base2's x
+
+    @property
+    def conditioned(self) -> bool:
+        return self.base2_range is not None
 
 
 class _Keypoints(nn.Module):
@@ -118,7 +127,8 @@ class PairDistanceModel(nn.Module):
         self.n1, self.n2 = self.r1.dof, self.r2.dof
         self.kp1 = _Keypoints(config.robot1, Pose())
         self.kp2 = _Keypoints(config.robot2, Pose(config.base2_xyz, config.base2_rpy))
-        n_feat = self.kp1.count * self.kp2.count + len(config.softmin_betas)
+        self.n_cond = 1 if config.conditioned else 0
+        n_feat = self.kp1.count * self.kp2.count + len(config.softmin_betas) + self.n_cond
         self.register_buffer("feat_mean", torch.zeros(n_feat, dtype=torch.float64))
         self.register_buffer("feat_std", torch.ones(n_feat, dtype=torch.float64))
         self.register_buffer("output_offset", torch.zeros((), dtype=torch.float64))
@@ -132,12 +142,18 @@ class PairDistanceModel(nn.Module):
 
     @property
     def dof(self) -> int:
-        return self.n1 + self.n2
+        """Input width: both arms' joints, plus the base distance of a conditioned model."""
+        return self.n1 + self.n2 + self.n_cond
 
     def features(self, q: torch.Tensor) -> torch.Tensor:
-        """Raw features (B, F): pairwise keypoint distances [m] and their soft minima."""
+        """Raw features (B, F): pairwise keypoint distances [m], their soft minima (and ``r``)."""
+        n = self.n1 + self.n2
         p1 = self.kp1(q[:, : self.n1])
-        p2 = self.kp2(q[:, self.n1 :])
+        p2 = self.kp2(q[:, self.n1 : n])
+        if self.n_cond:
+            shift = torch.zeros(q.shape[0], 1, 3, dtype=p2.dtype)
+            shift[:, 0, 0] = q[:, n].to(p2.dtype)
+            p2 = p2 + shift
         # |a − b|² = |a|² + |b|² − 2 a·b: one small batched product instead of a (B, P1, P2, 3)
         # difference tensor (several times faster at training batch sizes).
         sq = (p1 * p1).sum(-1)[:, :, None] + (p2 * p2).sum(-1)[:, None, :]
@@ -147,7 +163,8 @@ class PairDistanceModel(nn.Module):
             -torch.logsumexp(-beta * dist, dim=1, keepdim=True) / beta
             for beta in self.config.softmin_betas
         ]
-        return torch.cat([dist, *soft], dim=1)
+        extra = [q[:, n:].to(dist.dtype)] if self.n_cond else []
+        return torch.cat([dist, *soft, *extra], dim=1)
 
     def head(self, features: torch.Tensor) -> torch.Tensor:
         """The MLP on raw features (B, F) → distance (B,) [m]."""
@@ -193,6 +210,7 @@ def _config_from_card(card: dict[str, Any]) -> DistanceModelConfig:
         base2_rpy=tuple(c["base2_rpy"]),
         hidden=tuple(c["hidden"]),
         softmin_betas=tuple(c["softmin_betas"]),
+        base2_range=tuple(c["base2_range"]) if c.get("base2_range") else None,  # type: ignore[arg-type]
     )
 
 
@@ -224,7 +242,13 @@ def load_distance_file(path: Path, expect_pair: str | None = None) -> PairDistan
     return model
 
 
-SHIPPED_DISTANCE_MODELS = ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite", "ur5_kinova")
+SHIPPED_DISTANCE_MODELS = (
+    "ur5_ur5",
+    "ur5_ur5_diag",
+    "ur5_ur5_opposite",
+    "ur5_kinova",
+    "ur5_ur5_any",
+)
 
 
 def load_distance_model(pair: str) -> PairDistanceModel:

@@ -11,7 +11,13 @@ import torch
 from tqdm import tqdm
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.geometry.distance_data import CUTOFF, PAIRS, pair_cell
+from nehmo_core.geometry.distance_data import (
+    BASE_RANGE,
+    CONDITIONED_PAIRS,
+    CUTOFF,
+    PAIRS,
+    pair_cell,
+)
 from nehmo_core.geometry.distance_model import DistanceModelConfig, PairDistanceModel
 
 
@@ -51,6 +57,7 @@ def new_model(pair: str, hidden: tuple[int, ...]) -> PairDistanceModel:
         base2_xyz=arm2.base.xyz,
         base2_rpy=arm2.base.rpy,
         hidden=hidden,
+        base2_range=BASE_RANGE if pair in CONDITIONED_PAIRS else None,
     )
     return PairDistanceModel(cfg)
 
@@ -76,8 +83,10 @@ def train(
     pair: str, q: np.ndarray, d: np.ndarray, settings: DistanceTrainSettings
 ) -> tuple[PairDistanceModel, dict[str, float]]:
     """Fit a model on (q, d); returns the model and a summary (wall time, final losses)."""
-    if pair not in PAIRS:
-        raise InvalidValueError("pair", f"must be one of {sorted(PAIRS)}", pair)
+    if pair not in PAIRS and pair not in CONDITIONED_PAIRS:
+        raise InvalidValueError(
+            "pair", f"must be one of {sorted([*PAIRS, *CONDITIONED_PAIRS])}", pair
+        )
     torch.manual_seed(settings.seed)
     t0 = time.perf_counter()
     model = new_model(pair, settings.hidden)

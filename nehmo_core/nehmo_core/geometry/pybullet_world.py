@@ -17,7 +17,7 @@ import pybullet as pb
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import ModelFileError
-from nehmo_core.robots.model import ArmSpec, Cell
+from nehmo_core.robots.model import ArmSpec, Cell, Pose
 
 DEFAULT_CUTOFF = 3.0
 """Distances beyond this [m] are not resolved: the query reports the cutoff instead."""
@@ -101,6 +101,13 @@ class CellWorld:
         for j, v in zip(self._joint_index[arm_id], qv, strict=True):
             pb.resetJointState(body, j, float(v), physicsClientId=self.client)
         self._q[arm_id] = qv.copy()
+
+    def set_base_pose(self, arm_id: str, pose: Pose) -> None:
+        """Move one arm's base to ``pose`` (world frame); the cell keeps its declared pose."""
+        quat = pb.getQuaternionFromEuler(pose.rpy)
+        pb.resetBasePositionAndOrientation(
+            self.body(arm_id), pose.xyz, quat, physicsClientId=self.client
+        )
 
     def set_configuration(self, q: Mapping[str, ArrayLike]) -> None:
         """Pose several arms at once: ``{arm_id: q}``."""

@@ -130,6 +130,7 @@ SHIPPED_VALUE_FUNCTIONS: dict[str, tuple[str, ...]] = {
     "ur5_ur5_opposite": ("bc+sym",),
     "ur5_kinova": ("bc+sym",),
     "kinova_ur5": ("bc+sym",),
+    "ur5_ur5_any": ("bc+sym",),
 }
 
 

@@ -18,6 +18,8 @@ given as ``[KIND=]SOURCE``:
   diagonal neighbours of the five-UR5 cell) and ``ur5_ur5_opposite`` (1.2 m, the outer arms
   facing each other across the centre arm in the three- and five-UR5 cells). Each peer uses the
   model whose base distance matches (:func:`~nehmo_core.planning.pair_frame.match_pair`).
+  A UR5 pair at any other base distance within its range uses ``ur5_ur5_any``, the value
+  function conditioned on the base distance (loaded only when some pair of the cell needs it).
 
 """
 
@@ -34,7 +36,13 @@ import casadi as ca
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError
 from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS, load_value_function
-from nehmo_core.planning.pair_frame import inverse_pose, match_pair, pose_from_matrix, relative_pose
+from nehmo_core.planning.pair_frame import (
+    ModelGeometry,
+    inverse_pose,
+    match_pair,
+    pose_from_matrix,
+    relative_pose,
+)
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots.model import Cell, Pose
 
@@ -67,7 +75,7 @@ SYNTHETIC = "synthetic"
 _SYNTHETIC_PAIRS = {("ur5", "ur5"): "ur5_ur5", ("ur5", "kinova_gen3_6dof"): "ur5_kinova"}
 """(controlled robot, other robot) → pair with a synthetic stand-in (a learned-distance cell)."""
 SHIPPED_PAIRS: dict[tuple[str, str], tuple[str, ...]] = {
-    ("ur5", "ur5"): ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite"),
+    ("ur5", "ur5"): ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite", "ur5_ur5_any"),
     ("ur5", "kinova_gen3_6dof"): ("ur5_kinova",),
     ("kinova_gen3_6dof", "ur5"): ("kinova_ur5",),
 }
@@ -280,24 +288,30 @@ class ModelRegistry:
         return [made[p] for p in pairs if p in made]
 
 
-def pair_geometry(pair: str) -> tuple[str, str, Pose]:
-    """``(robot 1, robot 2, base of arm 2 in arm 1's frame)`` of a named arm pair: what
-    :func:`~nehmo_core.planning.pair_frame.match_pair` takes per model."""
-    from nehmo_core.geometry.distance_data import pair_cell
+def pair_geometry(pair: str) -> ModelGeometry:
+    """``(robot 1, robot 2, base of arm 2 in arm 1's frame[, base-distance range])`` of a
+    named arm pair: what :func:`~nehmo_core.planning.pair_frame.match_pair` takes per model."""
+    from nehmo_core.geometry.distance_data import BASE_RANGE, CONDITIONED_PAIRS, pair_cell
 
     model_cell, a, b = pair_cell(pair)
     arm1, arm2 = model_cell.arm(a), model_cell.arm(b)
-    return arm1.robot.name, arm2.robot.name, pose_from_matrix(relative_pose(arm1.base, arm2.base))
+    base2 = pose_from_matrix(relative_pose(arm1.base, arm2.base))
+    if pair in CONDITIONED_PAIRS:
+        return arm1.robot.name, arm2.robot.name, base2, BASE_RANGE
+    return arm1.robot.name, arm2.robot.name, base2
 
 
 def _cell_uses(pair: str, cell: Cell) -> bool:
-    """Whether some (own, peer) pair of ``cell`` maps onto the shipped pair model ``pair``."""
+    """Whether some (own, peer) pair of ``cell`` maps onto the shipped pair model ``pair`` and
+    onto no shipped model listed before it (those take precedence)."""
+    names = next(n for n in SHIPPED_PAIRS.values() if pair in n)
+    earlier = [pair_geometry(n) for n in names[: names.index(pair)]]
     model = [pair_geometry(pair)]
     return any(
-        match_pair(own, peer, model) is not None
+        match_pair(own, peer, model) is not None and match_pair(own, peer, earlier) is None
         for own in cell.arms
         for peer in cell.arms
-        if own.arm_id != peer.arm_id
+        if own.arm_id != peer.arm_id and (own.robot.name, peer.robot.name) == model[0][:2]
     )
 
 

@@ -120,7 +120,7 @@ class NehmoPlanner(StallEscape):
                     c_loop.model(model)
         self.pairs: dict[str, PairMapping] = {}
         skipped, unmodelled = [], []
-        geometry = [(m.robot1, m.robot2, m.base2) for m in self.models]
+        geometry = [m.geometry for m in self.models]
         for peer in cell.arms:
             if peer.arm_id == arm_id:
                 continue
@@ -292,8 +292,9 @@ class NehmoPlanner(StallEscape):
         groups, horizons = [], []
         for m, b, members in now.groups:
             predicted = np.array([now.states[i] for i in members])
-            peer_grads = np.array([now.grads[i][n1:] for i in members])
-            predicted[:, n1:] += s.t_plan * worst_case_disturbance(peer_grads, b * s.d_max)
+            n12 = n1 + self.models[m].n2  # a conditioned model's r (after q²) never moves
+            peer_grads = np.array([now.grads[i][n1:n12] for i in members])
+            predicted[:, n1:n12] += s.t_plan * worst_case_disturbance(peer_grads, b * s.d_max)
             groups.append((m, predicted))
             horizons.append(b * s.t_safe)
         constraints = Constraints(
@@ -313,7 +314,9 @@ class NehmoPlanner(StallEscape):
         if s.fail_safe == "maximin" and len(now.ids) > 1:
             chosen = self._maximin.critical(now.ids, now.values)
             own = np.array([now.grads[i][:n1] for i in chosen])
-            peer = np.array([now.grads[i][n1:] for i in chosen])
+            peer = np.array(
+                [now.grads[i][n1 : n1 + self.models[now.model_index[i]].n2] for i in chosen]
+            )
             values = now.values[chosen]
             d_max = s.d_max * now.bounds[chosen]
             return maximin_command(own, peer, u_max, d_max, values, s.t_plan)

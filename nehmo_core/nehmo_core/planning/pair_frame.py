@@ -15,6 +15,11 @@ A model whose controlled arm is the *second* arm of a learned distance (``kinova
 Kinova at the origin, the UR5 at ``(0.6, 0, 0)`` facing it) has ``M = T_2_1``, the inverse of
 the distance's base offset (:func:`inverse_pose`); in the UR5-Kinova cell both arms' pairs then
 map with zero shifts.
+
+A *conditioned* model (a fourth entry ``(r_low, r_high)``) serves every base distance ``r`` in
+that range: its frame has robot 2 at ``base2`` moved by ``(r, 0, 0)``, and the mapping appends
+``r`` to the pair state (:attr:`PairMapping.condition`). One model then serves any layout of
+arms at the same mounting height.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -32,6 +37,7 @@ from nehmo_core.robots.loader import load_robot
 from nehmo_core.robots.model import ArmSpec, Pose, RobotModel, wrap_angle
 
 __all__ = [
+    "ModelGeometry",
     "PairMapping",
     "arm_reach",
     "base_yaw_joint",
@@ -52,10 +58,11 @@ class PairMapping:
     model_index: int
     own_shift: np.ndarray  # (n1,) added to the own joint vector [rad]
     peer_shift: np.ndarray  # (n2,) added to the peer joint vector [rad]
+    condition: np.ndarray = field(default_factory=lambda: np.zeros(0))  # appended (r [m])
 
     def state(self, q_own: np.ndarray, q_peer: np.ndarray) -> np.ndarray:
-        """The pair state ``x`` (n1 + n2,) in the model frame."""
-        return np.concatenate([q_own + self.own_shift, q_peer + self.peer_shift])
+        """The pair state ``x`` (n1 + n2 [+ 1],) in the model frame."""
+        return np.concatenate([q_own + self.own_shift, q_peer + self.peer_shift, self.condition])
 
 
 def relative_pose(own: Pose, peer: Pose) -> np.ndarray:
@@ -117,20 +124,35 @@ def _shift(robot: RobotModel, sign: float, angle: float) -> np.ndarray:
     return out
 
 
+ModelGeometry = tuple[str, str, Pose] | tuple[str, str, Pose, tuple[float, float] | None]
+"""``(robot1, robot2, base2[, (r_low, r_high)])`` of a pair model; see the module docstring."""
+
+
 def match_pair(
-    own: ArmSpec, peer: ArmSpec, models: Sequence[tuple[str, str, Pose]]
+    own: ArmSpec, peer: ArmSpec, models: Sequence[ModelGeometry]
 ) -> PairMapping | None:
-    """The first model ``(robot1, robot2, base2)`` that the cell pair maps onto, or None."""
+    """The first model ``(robot1, robot2, base2[, range])`` the cell pair maps onto, or None."""
     T = relative_pose(own.base, peer.base)
     yaw = _yaw_only(T)
     s_own, s_peer = base_yaw_joint(own.robot.name), base_yaw_joint(peer.robot.name)
-    for index, (robot1, robot2, base2) in enumerate(models):
+    for index, entry in enumerate(models):
+        robot1, robot2, base2 = entry[:3]
+        base_range = entry[3] if len(entry) > 3 else None
         if (robot1, robot2) != (own.robot.name, peer.robot.name):
             continue
         M = base2.matrix()
+        condition = np.zeros(0)
+        if base_range is not None:
+            r_cell = float(np.linalg.norm(T[:2, 3]))
+            if not base_range[0] <= r_cell <= base_range[1]:
+                continue
+            M = Pose((r_cell, 0.0, 0.0)).matrix() @ M
+            condition = np.array([r_cell])
         yaw_m = _yaw_only(M)
         if np.allclose(T, M, atol=POSITION_TOL):
-            return PairMapping(index, np.zeros(own.robot.dof), np.zeros(peer.robot.dof))
+            return PairMapping(
+                index, np.zeros(own.robot.dof), np.zeros(peer.robot.dof), condition
+            )
         if yaw is None or yaw_m is None or s_own is None or s_peer is None:
             continue
         r, r_m = np.linalg.norm(T[:2, 3]), np.linalg.norm(M[:2, 3])
@@ -139,7 +161,7 @@ def match_pair(
         phi = math.atan2(T[1, 3], T[0, 3]) - math.atan2(M[1, 3], M[0, 3]) if r > 0 else 0.0
         psi = float(wrap_angle(yaw - yaw_m - phi))
         own_shift = _shift(own.robot, s_own, float(wrap_angle(-phi)))
-        return PairMapping(index, own_shift, _shift(peer.robot, s_peer, psi))
+        return PairMapping(index, own_shift, _shift(peer.robot, s_peer, psi), condition)
     return None
 
 

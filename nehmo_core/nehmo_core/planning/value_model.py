@@ -31,6 +31,9 @@ class PairValueModel:
     """``V(τ, q¹, q²)`` [m] of one arm pair with CasADi evaluation, batched over peers.
 
     ``tau`` is time-to-go [s] in ``[0, horizon]``; ``x = (q¹, q²)`` [rad] in the pair frame.
+    A pose-conditioned model (``base_range`` set) serves every base distance ``r`` [m] in that
+    range, robot 2 then sitting at ``base2`` moved by ``(r, 0, 0)``; its states are
+    ``x = (q¹, q², r)`` (:func:`~nehmo_core.planning.pair_frame.match_pair` appends ``r``).
     """
 
     name: str
@@ -45,11 +48,17 @@ class PairValueModel:
     backend: str = "vm"
     library: Path | None = None  # the generated library of ``value_grad`` (compiled backend)
     certificates: tuple[dict[str, Any], ...] = ()  # from the model card (``nehmo verify``)
+    base_range: tuple[float, float] | None = None  # conditioned on r in this range [m]
     _calls: dict[int, _BufferedCall] = field(default_factory=dict, repr=False)
 
     @property
     def state_dim(self) -> int:
-        return self.n1 + self.n2
+        return self.n1 + self.n2 + (1 if self.base_range is not None else 0)
+
+    @property
+    def geometry(self) -> tuple[str, str, Pose, tuple[float, float] | None]:
+        """What :func:`~nehmo_core.planning.pair_frame.match_pair` takes for this model."""
+        return self.robot1, self.robot2, self.base2, self.base_range
 
     @classmethod
     def from_value_function(
@@ -70,8 +79,11 @@ class PairValueModel:
             ) from None
         cfg = distance.config
         base2 = Pose(cfg.base2_xyz, cfg.base2_rpy)
+        base_range = cfg.base2_range
         if n_first is None:
             robots, base, dofs = (cfg.robot1, cfg.robot2), base2, (distance.n1, distance.n2)
+        elif base_range is not None:
+            raise NehmoError(f"value function {name!r}: a swapped conditioned pair is not supported")
         else:
             robots, base = (cfg.robot2, cfg.robot1), inverse_pose(base2)
             dofs = (distance.n2, distance.n1)
@@ -90,6 +102,7 @@ class PairValueModel:
             backend=compiled.backend,
             library=compiled.library,
             certificates=tuple(value_function.card.get("certificates", ())),
+            base_range=None if base_range is None else (base_range[0], base_range[1]),
         )
 
     def certified_level(self, tau: float) -> float | None:

@@ -53,8 +53,11 @@ def _as_vector(values: Any, size: int, parameter: str) -> np.ndarray:
 class ArmPairSystem(HJISystem):
     """Two velocity-controlled arms: ``q̇¹ = u``, ``q̇² = d``, ``|uⱼ| ≤ ū``, ``|dⱼ| ≤ d̄`` [rad/s].
 
-    State ``x = (q¹ ∈ R^{n1}, q² ∈ R^{n2})`` [rad] in ``[−π, π]^{n1+n2}``. The Hamiltonian is the
-    L1 form ``H = ū‖∇_{q¹}V‖₁ − d̄‖∇_{q²}V‖₁`` (exact for box inputs).
+    State ``x = (q¹ ∈ R^{n1}, q² ∈ R^{n2})`` [rad] in ``[−π, π]^{n1+n2}``, followed by one
+    constant coordinate per entry of ``conditions`` (e.g. the base distance ``r`` [m] of a
+    pose-conditioned pair, in its ``(low, high)`` range; ``ṙ = 0``, never wrapped, unchanged by
+    the symmetry). The Hamiltonian is the L1 form ``H = ū‖∇_{q¹}V‖₁ − d̄‖∇_{q²}V‖₁`` (exact for
+    box inputs).
 
     ``boundary_fn`` maps ``(B, n1+n2) -> (B,)`` (e.g. a frozen distance network); its parameters
     are frozen (``requires_grad_(False)``) when it is a module. Symmetry ``f(q) = sign·q + offset``
@@ -72,6 +75,7 @@ class ArmPairSystem(HJISystem):
     horizon: float = 0.6  # T [s]
     system_name: str = "arm_pair"
     joint_periodic: tuple[bool, ...] | None = None  # default: every joint periodic
+    conditions: tuple[tuple[float, float], ...] = ()  # constant coordinates' (low, high)
 
     def __post_init__(self) -> None:
         for name in ("n1", "n2"):
@@ -80,19 +84,25 @@ class ArmPairSystem(HJISystem):
         for name in ("u_max", "d_max", "horizon"):
             if not getattr(self, name) > 0:
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))
+        for low, high in self.conditions:
+            if not low < high:
+                raise InvalidValueError("conditions", "each (low, high) needs low < high", (low, high))
         n = self.n1 + self.n2
+        m = len(self.conditions)
         sign = _as_vector(self.symmetry_sign, n, "symmetry_sign")
         if not np.all(np.abs(sign) == 1.0):
             raise InvalidValueError("symmetry_sign", "entries must be +1 or -1", sign.tolist())
-        object.__setattr__(self, "symmetry_sign", sign)
+        object.__setattr__(self, "symmetry_sign", np.concatenate([sign, np.ones(m)]))
         offset = _as_vector(self.symmetry_offset, n, "symmetry_offset")
-        object.__setattr__(self, "symmetry_offset", offset)
+        object.__setattr__(self, "symmetry_offset", np.concatenate([offset, np.zeros(m)]))
         if self.train_region.joint >= n:
             raise InvalidValueError("train_region.joint", f"must be < {n}", self.train_region.joint)
         if self.joint_periodic is None:
-            object.__setattr__(self, "joint_periodic", (True,) * n)
+            object.__setattr__(self, "joint_periodic", (True,) * n + (False,) * m)
         elif len(self.joint_periodic) != n:
             raise InvalidValueError("joint_periodic", f"must have {n} entries", self.joint_periodic)
+        else:
+            object.__setattr__(self, "joint_periodic", tuple(self.joint_periodic) + (False,) * m)
         if isinstance(self.boundary_fn, nn.Module):
             self.boundary_fn.requires_grad_(False)
 
@@ -102,11 +112,13 @@ class ArmPairSystem(HJISystem):
 
     @property
     def lower(self) -> np.ndarray:
-        return -np.pi * np.ones(self.n1 + self.n2)
+        low = [c[0] for c in self.conditions]
+        return np.concatenate([-np.pi * np.ones(self.n1 + self.n2), low])
 
     @property
     def upper(self) -> np.ndarray:
-        return np.pi * np.ones(self.n1 + self.n2)
+        high = [c[1] for c in self.conditions]
+        return np.concatenate([np.pi * np.ones(self.n1 + self.n2), high])
 
     @property
     def periodic(self) -> tuple[bool, ...]:
@@ -123,33 +135,37 @@ class ArmPairSystem(HJISystem):
 
     def parameters(self) -> dict[str, Any]:
         region = self.train_region
+        n = self.n1 + self.n2
+        conditions = {"conditions": [list(c) for c in self.conditions]} if self.conditions else {}
         return {
+            **conditions,
             "n1": self.n1,
             "n2": self.n2,
             "u_max": self.u_max,
             "d_max": self.d_max,
             "horizon": self.horizon,
-            "symmetry_sign": np.asarray(self.symmetry_sign).tolist(),
-            "symmetry_offset": np.asarray(self.symmetry_offset).tolist(),
+            "symmetry_sign": np.asarray(self.symmetry_sign)[:n].tolist(),
+            "symmetry_offset": np.asarray(self.symmetry_offset)[:n].tolist(),
             "train_region": {"joint": region.joint, "low": region.low, "high": region.high},
-            "joint_periodic": list(self.periodic),
+            "joint_periodic": list(self.periodic)[:n],
         }
 
     def boundary(self, x: Tensor) -> Tensor:
         return self.boundary_fn(x)
 
     def dynamics(self, x: Tensor, u: Tensor, d: Tensor) -> Tensor:
-        return torch.cat([u, d], dim=1)
+        still = x.new_zeros(x.shape[0], len(self.conditions))
+        return torch.cat([u, d, still], dim=1)
 
     def hamiltonian(self, x: Tensor, p: Tensor) -> Tensor:
-        p1, p2 = p[:, : self.n1], p[:, self.n1 :]
+        p1, p2 = p[:, : self.n1], p[:, self.n1 : self.n1 + self.n2]
         return self.u_max * p1.abs().sum(dim=1) - self.d_max * p2.abs().sum(dim=1)
 
     def optimal_control(self, x: Tensor, p: Tensor) -> Tensor:
         return self.u_max * torch.sign(p[:, : self.n1])
 
     def worst_disturbance(self, x: Tensor, p: Tensor) -> Tensor:
-        return -self.d_max * torch.sign(p[:, self.n1 :])
+        return -self.d_max * torch.sign(p[:, self.n1 : self.n1 + self.n2])
 
     def _wrap_periodic(self, x: Tensor) -> Tensor:
         mask = torch.as_tensor(self.periodic, dtype=torch.bool)

@@ -47,8 +47,13 @@ def make_arm_pair_system(pair: str) -> ArmPairSystem:
     f = robot_mirror_map(r1.name) + robot_mirror_map(r2.name)
     # Both joint-1 maps are q → π − q: the halves [−π/2, π/2] and its complement swap.
     assert f.sign[r1.dof] == -1.0 and np.isclose(f.offset[r1.dof], np.pi)
+    distance = load_distance_model(pair).float()
+    # A conditioned pair (``*_any``): r is a constant coordinate; the mirror y → −y keeps both
+    # bases on the x axis, so it is the same joint map at every r.
+    base_range = distance.config.base2_range
     return ArmPairSystem(
-        boundary_fn=load_distance_model(pair).float(),
+        conditions=(base_range,) if base_range is not None else (),
+        boundary_fn=distance,
         n1=r1.dof,
         n2=r2.dof,
         symmetry_sign=np.array(f.sign),

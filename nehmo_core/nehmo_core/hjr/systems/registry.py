@@ -16,8 +16,16 @@ from nehmo_core.hjr.systems.two_link import TwoLinkPair
 
 __all__ = ["make_system", "register_system", "system_names"]
 
-ARM_PAIR_NAMES = ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite", "ur5_kinova", "kinova_ur5")
-"""The shipped arm pairs, built by :func:`.arm_pairs.make_arm_pair_system`."""
+ARM_PAIR_NAMES = (
+    "ur5_ur5",
+    "ur5_ur5_diag",
+    "ur5_ur5_opposite",
+    "ur5_kinova",
+    "kinova_ur5",
+    "ur5_ur5_any",
+)
+"""The shipped arm pairs, built by :func:`.arm_pairs.make_arm_pair_system` (``*_any``: conditioned
+on the base distance, for any layout)."""
 
 
 def _arm_pair_factory(pair: str) -> Callable[[], HJISystem]:

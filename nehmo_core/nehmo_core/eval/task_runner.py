@@ -1,0 +1,269 @@
+"""Run planner rows on a directory of Ha et al.'s task files (``nehmo evaluate --tasks DIR``).
+
+Every task is its own cell (random base poses and yaws, one to four UR5s), so each episode
+builds its planners for that cell; value models are loaded once per worker (the registry caches
+them, and the UR5 pairs at any base distance use the pose-conditioned ``ur5_ur5_any``). Success
+follows our rule (every arm within 0.1 rad, joint-space L2 norm, of its goal at once, within the
+time limit, no collision); the episodes last :data:`TIME_LIMIT` s like theirs. Tasks with
+obstacles are listed and skipped: the planners model arms only.
+
+``OUT/summary.json`` keeps the setups' row schema (``rows[].row``, ``rows[].ours`` …) and adds
+``rows[].by_arms``: the same metrics per arm count.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import platform
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from nehmo_core.eval.episode import EpisodeSettings, run_episode
+from nehmo_core.eval.ha_tasks import HaTask, check_joint_convention, pair_distances
+from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log
+from nehmo_core.eval.planners import build_planners, unmodelled_peers
+from nehmo_core.eval.report import json_safe
+from nehmo_core.eval.setups import OPT_KINDS, parse_row, row_slug
+from nehmo_core.logs import remove_bag
+from nehmo_core.planning.models import ModelRegistry, ValueModelSource
+from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.sim.cell_sim import CellSimulator
+
+__all__ = ["PUBLISHED", "TIME_LIMIT", "TaskConfig", "run_tasks", "task_summary"]
+
+TIME_LIMIT = 20.0
+"""[s] per episode, as Ha et al.'s episodes."""
+PUBLISHED: dict[str, dict[str, str]] = {
+    "ha2020": {
+        "label": "Ha et al. (decentralized RL)",
+        "source": "Ha, Xu, Song, 'Learning a Decentralized Multi-arm Motion Planner', CoRL 2020, "
+        "abstract: >90 % success for a 10-arm system; per-arm-count rates on these 48 "
+        "tasks are not in our references",
+    },
+    "dgmap": {
+        "label": "DG-MAP (diffusion + conflict search)",
+        "source": "Parimi & Williams, CoRL 2025: success above 90 % with up to 8 arms on Ha et "
+        "al.'s tasks (secondary summary; per-arm-count rates not in our references)",
+    },
+}
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """What every episode of a task run shares."""
+
+    out_dir: Path
+    value_models: tuple[ValueModelSource, ...] = ()
+    backend: str = "auto"
+    planner_settings: PlannerSettings = field(default_factory=PlannerSettings)
+    episode: EpisodeSettings = field(default_factory=lambda: EpisodeSettings(time_limit=TIME_LIMIT))
+
+
+_STATE: dict[str, Any] = {}
+
+
+def _init_worker() -> None:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import torch
+
+    torch.set_num_threads(1)
+
+
+def _registry(config: TaskConfig) -> ModelRegistry:
+    key = (config.value_models, config.backend)
+    if _STATE.get("key") != key:
+        _STATE["key"] = key
+        _STATE["registry"] = ModelRegistry(config.value_models, config.backend)
+    registry: ModelRegistry = _STATE["registry"]
+    return registry
+
+
+def _log_path(config: TaskConfig, row: str, task: HaTask) -> Path:
+    return config.out_dir / "logs" / row_slug(row) / f"task_{task.task_id}"
+
+
+def _run(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult, dict[str, Any]]:
+    cell, settings = task.cell, config.episode
+    kinds = parse_row(row, cell)
+    registry = _registry(config)
+    planners = build_planners(
+        cell, kinds, task.scenario, 1.0 / settings.rate, registry, config.planner_settings
+    )
+    used = {
+        "value_models": {k: registry.described.get(k, []) for k in set(kinds.values()) if k in OPT_KINDS},
+        "unmodelled_peers": unmodelled_peers(planners),
+        "epsilon": {a: p.epsilon_source for a, p in planners.items() if isinstance(p, NehmoPlanner)},
+    }
+    log_path = _log_path(config, row, task)
+    remove_bag(log_path)
+    result = run_episode(
+        cell,
+        task.scenario,
+        planners,
+        settings,
+        kinds=kinds,
+        simulator=CellSimulator(cell, settings.substeps, settings.self_collision),
+        log_path=log_path,
+        metadata={"task": task.task_id, "task_file": str(task.path), "row": row, **used},
+    )
+    return result, used
+
+
+def _runnable(tasks: Sequence[HaTask]) -> tuple[list[HaTask], list[dict[str, Any]]]:
+    """Tasks to run, and the skipped ones with the reason."""
+    keep, skipped = [], []
+    for task in tasks:
+        check_joint_convention(task)
+        if task.obstacles:
+            skipped.append({"task": task.task_id, "arms": task.arm_count, "reason": "obstacles"})
+        else:
+            keep.append(task)
+    return keep, skipped
+
+
+def run_tasks(
+    config: TaskConfig,
+    rows: Sequence[str],
+    tasks: Sequence[HaTask],
+    workers: int = 1,
+    progress: bool = True,
+    on_row: Callable[[dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """Run every row on every runnable task; return the summary (also what ``on_row`` gets,
+    row by row)."""
+    from tqdm import tqdm
+
+    runnable, skipped = _runnable(tasks)
+    for row in rows:  # fail early on a bad row
+        for task in runnable:
+            parse_row(row, task.cell)
+    executor = (
+        ProcessPoolExecutor(workers, multiprocessing.get_context("spawn"), _init_worker)
+        if workers > 1
+        else None
+    )
+    start = time.perf_counter()
+    summaries = []
+    try:
+        for row in rows:
+            t0 = time.perf_counter()
+            used: dict[str, Any] = {"value_models": {}, "unmodelled_peers": {}, "epsilon": {}}
+            with tqdm(total=len(runnable), desc=f"tasks {row}", disable=not progress) as bar:
+                if executor is None:
+                    outputs: Any = (_run(config, row, t) for t in runnable)
+                else:
+                    futures = [executor.submit(_run, config, row, t) for t in runnable]
+                    outputs = (f.result() for f in as_completed(futures))
+                for _, extra in outputs:
+                    for key in ("value_models", "unmodelled_peers"):
+                        used[key].update(extra[key])
+                    bar.update(1)
+            results = [evaluate_log(_log_path(config, row, t)) for t in runnable]
+            summary = _row_summary(config, row, runnable, results, used, time.perf_counter() - t0)
+            summaries.append(summary)
+            if on_row is not None:
+                on_row(summary)
+    finally:
+        if executor is not None:
+            executor.shutdown(cancel_futures=True)
+    return task_summary(config, summaries, tasks, skipped, workers, time.perf_counter() - start)
+
+
+def _row_summary(
+    config: TaskConfig,
+    row: str,
+    tasks: Sequence[HaTask],
+    results: Sequence[EpisodeResult],
+    used: dict[str, Any],
+    wall: float,
+) -> dict[str, Any]:
+    counts = sorted({t.arm_count for t in tasks})
+    by_arms = {
+        str(n): aggregate([r for t, r in zip(tasks, results, strict=True) if t.arm_count == n])
+        for n in counts
+    }
+    return {
+        "row": row,
+        "ours": aggregate(results).to_dict(),
+        "by_arms": {n: m.to_dict() for n, m in by_arms.items()},
+        "wall_seconds": wall,
+        "value_models": used["value_models"],
+        "unmodelled_peers": used["unmodelled_peers"],
+        "episodes": [
+            {
+                "task": t.task_id,
+                "arms": t.arm_count,
+                "outcome": r.outcome,
+                "collision": r.collision_kind,
+                "end_time": r.end_time,
+                "log": str(_log_path(config, row, t)),
+            }
+            for t, r in zip(tasks, results, strict=True)
+        ],
+    }
+
+
+def task_summary(
+    config: TaskConfig,
+    rows: Sequence[dict[str, Any]],
+    tasks: Sequence[HaTask],
+    skipped: Sequence[dict[str, Any]],
+    workers: int,
+    wall: float,
+) -> dict[str, Any]:
+    distances = [d for t in tasks for d in pair_distances(t.cell)]
+    return json_safe(
+        {
+            "setup": "ha_tasks",
+            "tasks": len(tasks),
+            "task_ids": [t.task_id for t in tasks],
+            "skipped": list(skipped),
+            "pair_base_distance_m": [min(distances), max(distances)] if distances else None,
+            "success_rule": "every arm's wrapped joint error (L2) <= 0.1 rad at once within "
+            f"{config.episode.time_limit:g} s, no collision (Ha et al.: end effectors within "
+            "0.02 m and 0.1 rad, 20 s)",
+            "published": PUBLISHED,
+            "machine": {"python": platform.python_version(), "platform": platform.platform()},
+            "workers": workers,
+            "episode_settings": config.episode.to_dict(),
+            "planner_settings": config.planner_settings.to_dict(),
+            "value_model_sources": [str(s) for s in config.value_models],
+            "wall_seconds": wall,
+            "rows": list(rows),
+        }
+    )
+
+
+def markdown(summary: dict[str, Any]) -> str:
+    """SR / CR / stuck per row and per arm count."""
+    counts = sorted({n for row in summary["rows"] for n in row["by_arms"]}, key=int)
+    head = " | ".join(f"{n} arm{'s' if n != '1' else ''} SR/CR" for n in counts)
+    lines = [
+        f"### Ha et al.'s tasks ({summary['tasks']} files, {len(summary['skipped'])} skipped)",
+        "",
+        f"| planners | tasks | SR % | CR % | stuck % | {head} |",
+        "|---|---|---|---|---|" + "---|" * len(counts),
+    ]
+    for row in summary["rows"]:
+        ours = row["ours"]
+        cells = []
+        for n in counts:
+            m = row["by_arms"].get(n)
+            cells.append("–" if m is None else f"{m['sr']:.0f} / {m['cr_inter_arm']:.0f}")
+        lines.append(
+            f"| {row['row']} | {ours['episodes']} | {ours['sr']:.0f} | {ours['cr_inter_arm']:.0f} "
+            f"| {ours['stuck_rate']:.0f} | {' | '.join(cells)} |"
+        )
+    lines += ["", f"Success: {summary['success_rule']}."]
+    if summary["skipped"]:
+        listed = ", ".join(f"{s['task']} ({s['reason']})" for s in summary["skipped"])
+        lines += ["", f"Skipped: {listed}."]
+    lines += ["", "Published on these tasks (cited, not rerun):"]
+    lines += [f"- {p['label']}: {p['source']}." for p in summary["published"].values()]
+    return "\n".join(lines) + "\n"
