@@ -1,4 +1,4 @@
-"""The main job (``./run demo``): a dual-UR5 episode through the ROS 2 node suite.
+"""The main job (``./run demo``): a dual-UR5 episode (or any cell's) through the ROS 2 node suite.
 
 The ``sim_bridge``, one ``arm_planner`` per arm and the ``recorder`` run as separate processes
 on rclpy (ROS 2 Jazzy, a DDS domain of their own, discovery kept on this machine), started,
@@ -15,6 +15,7 @@ Needs the ``nehmo_ros`` and ``sim_bridge`` packages and ROS 2 Jazzy's rclpy inst
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
@@ -24,6 +25,12 @@ from nehmo_ros.suite_settings import SuiteSettings
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--cell",
+        default="dual_ur5",
+        help="shipped cell name or a cell YAML path (any layout, e.g. "
+        "examples/cells/irregular_three_ur5.yaml)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="scenario set seed")
     parser.add_argument("--index", type=int, default=0, help="scenario index in the set")
     parser.add_argument("--planner", default="nehmo", help="planner kind (or one per arm, '/')")
@@ -46,11 +53,13 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidValueError("out", "must be a directory (it is a file)", str(out))
     settings = SuiteSettings(planner=args.planner, model=args.model, time_limit=args.time_limit)
     out.mkdir(parents=True, exist_ok=True)
-    cell = load_cell("dual_ur5")
+    cell = load_cell(args.cell)
     scenarios = generate_scenario_set(cell, args.seed, args.index + 1)
+    if Path(args.cell).suffix in (".yaml", ".yml"):  # the nodes load the file itself
+        scenarios = dataclasses.replace(scenarios, cell=str(Path(args.cell).resolve()))
     scenario_file = save_scenario_set(scenarios, out / "scenarios.json")
     print(
-        f"dual_ur5, scenario {args.index} of seed {args.seed}: sim_bridge + "
+        f"{cell.name}, scenario {args.index} of seed {args.seed}: sim_bridge + "
         f"{len(cell.arms)} x arm_planner ({args.planner}, model {args.model}) + recorder "
         "as separate rclpy processes (ROS 2 Jazzy, this machine only)",
         flush=True,

@@ -27,6 +27,7 @@ summary), :mod:`.replay`; this module is the command line.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -61,6 +62,9 @@ def scenario_file_for(args: argparse.Namespace, out_dir: Path) -> Path:
         return Path(args.scenarios).resolve()
     cell = load_cell(args.cell)
     scenarios: ScenarioSet = generate_scenario_set(cell, args.seed, args.count)
+    if Path(args.cell).suffix in (".yaml", ".yml"):
+        # the file, not its name, is what the nodes (and a re-run) load
+        scenarios = dataclasses.replace(scenarios, cell=str(Path(args.cell).resolve()))
     return save_scenario_set(scenarios, out_dir / "scenarios.json").resolve()
 
 

@@ -60,6 +60,7 @@ def run_episode(
     """Run one episode of ``scenario_file`` through the node suite; evaluate its log."""
     scenarios = load_scenario_set(scenario_file)
     cell = load_cell(scenarios.cell)
+    cell_ref = scenarios.cell  # a shipped name or a cell YAML path: what every node loads
     kinds = parse_row(settings.planner, cell)
     domain_id = settings.domain_id if settings.domain_id is not None else isolated_domain()
     env = child_env(settings, domain_id)
@@ -86,14 +87,14 @@ def run_episode(
             "recorder",
             node_command(
                 "nehmo_ros.recorder",
-                {"cell": cell.name, "output": str(log_path), **sim},
+                {"cell": cell_ref, "output": str(log_path), **sim},
                 install_space=settings.install_space,
             ),
         )
         if not recorder.wait_for("recording", settings.startup_timeout):
             raise NehmoError(f"the recorder did not start:\n{recorder.output()[-2000:]}")
         for arm_id, kind in kinds.items():
-            params = {"arm_id": arm_id, "cell": cell.name, "planner": kind, "model": settings.model}
+            params = {"arm_id": arm_id, "cell": cell_ref, "planner": kind, "model": settings.model}
             launch(
                 f"planner_{arm_id}",
                 node_command(
@@ -108,7 +109,7 @@ def run_episode(
             node_command(
                 "sim_bridge.bridge",
                 {
-                    "cell": cell.name,
+                    "cell": cell_ref,
                     "scenarios": str(scenario_file),
                     "episode": episode,
                     "sim_time": True,

@@ -78,7 +78,7 @@ def _save(
 ) -> None:
     from safetensors.torch import save_file
 
-    tensors = {k: v.detach().clone().contiguous() for k, v in tensors.items()}
+    tensors = {k: v.detach().cpu().clone().contiguous() for k, v in tensors.items()}
     _write_atomic(out_dir / f"{stem}.safetensors", lambda p: save_file(tensors, str(p)))
     text = json.dumps(meta, indent=2, sort_keys=True)
     _write_atomic(out_dir / f"{stem}.json", lambda p: p.write_text(text + "\n"))

@@ -228,11 +228,16 @@ def train(
     resume: bool = False,
     progress: bool = True,
     stop_after_steps: int | None = None,
+    device: str = "cpu",
 ) -> TrainResult:
     """Train (or resume) a value network for ``system``; write checkpoints and the model.
 
     ``stop_after_steps`` ends the call early after a checkpoint (used to test resume).
+    ``device`` (``cpu``, ``cuda``, ``auto``: see :func:`resolve_device`) holds the network and
+    the system's boundary module; batches are drawn on the CPU (so a seed draws the same
+    states everywhere) and moved there. Saved files are CPU tensors either way.
     """
+    target = resolve_device(device)
     out_dir = Path(out_dir)
     resuming = _prepare_out_dir(out_dir, resume)
     schedule = Schedule.from_settings(settings)
@@ -240,6 +245,7 @@ def train(
     network = ValueNetwork(system, settings.variant, settings.network, generator)
     optimizer = torch.optim.Adam(network.parameters(), lr=settings.learning_rate)
     step, wall = _restore(out_dir, system, settings, network, optimizer) if resuming else (0, 0.0)
+    _move(network, system, optimizer, target)
     log = _CsvLog(out_dir / LOG_FILE, keep_before_step=step)
     ckpt_steps = max(1, settings.checkpoint_every // settings.batch_size)
     last = (
@@ -275,6 +281,42 @@ def train(
     return TrainResult(out_dir, step, schedule.samples_before(step), wall, final)
 
 
+DEVICES = ("auto", "cpu", "cuda")
+
+
+def resolve_device(name: str) -> torch.device:
+    """``cpu``; ``cuda`` (a clear error when no CUDA device is present); ``auto``: cuda if
+    present, else cpu."""
+    if name not in DEVICES:
+        raise InvalidValueError("device", f"must be one of {list(DEVICES)}", name)
+    if name == "cuda" and not torch.cuda.is_available():
+        raise InvalidValueError(
+            "device",
+            "asks for CUDA, but torch sees no CUDA device (torch.cuda.is_available() is False; "
+            f"this torch is {torch.__version__}); use --device cpu or auto",
+            name,
+        )
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+def _move(
+    network: ValueNetwork, system: HJISystem, optimizer: torch.optim.Optimizer, device: torch.device
+) -> None:
+    """Put the network, its optimizer state and the system's boundary module on ``device``."""
+    if device.type == "cpu":
+        return
+    network.to(device)
+    boundary = getattr(system, "boundary_fn", None)
+    if isinstance(boundary, torch.nn.Module):
+        boundary.to(device)
+    for state in optimizer.state.values():
+        for key, value in state.items():
+            if isinstance(value, Tensor):
+                state[key] = value.to(device)
+
+
 def _train_step(
     network: ValueNetwork,
     optimizer: torch.optim.Optimizer,
@@ -284,6 +326,9 @@ def _train_step(
     step: int,
 ) -> dict[str, float]:
     tau, x, mask = draw_batch(system, settings, schedule, step)
+    device = network._center.device
+    if device.type != "cpu":
+        tau, x, mask = tau.to(device), x.to(device), mask.to(device)
     for group in optimizer.param_groups:
         group["lr"] = settings.learning_rate_at(step, schedule.total_steps)
     terms = loss_terms(network, settings, tau, x, mask, step < schedule.pretrain_steps)

@@ -18,7 +18,7 @@ from nehmo_core.errors import (
 )
 from nehmo_core.hjr.model_files import CHECKPOINT
 from nehmo_core.hjr.systems import make_system, system_names
-from nehmo_core.hjr.train import train
+from nehmo_core.hjr.train import DEVICES, train
 from nehmo_core.hjr.train_settings import DIRICHLET_LOSSES, LR_SCHEDULES, PRESETS, TrainSettings
 
 __all__ = ["add_train_arguments", "main", "parse_count", "run_train", "settings_from_args"]
@@ -58,6 +58,12 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dirichlet-loss", help=f"one of {list(DIRICHLET_LOSSES)}")
     parser.add_argument("--checkpoint-every", default=None, help="samples between checkpoints")
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    parser.add_argument(
+        "--device",
+        default="cpu",
+        choices=DEVICES,
+        help="where to train: cpu, cuda (an error if absent) or auto (cuda when present)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
@@ -123,7 +129,14 @@ def run_train(args: argparse.Namespace) -> int:
         if args.threads < 1:
             raise InvalidValueError("threads", "must be >= 1", args.threads)
         torch.set_num_threads(args.threads)
-    result = train(system, settings, args.out, resume=args.resume, progress=not args.no_progress)
+    result = train(
+        system,
+        settings,
+        args.out,
+        resume=args.resume,
+        progress=not args.no_progress,
+        device=args.device,
+    )
     print(
         f"{system.name} {settings.variant}: {result.steps} steps, {result.samples} samples, "
         f"{result.wall_seconds:.1f} s ({result.samples_per_second:.0f} samples/s), "

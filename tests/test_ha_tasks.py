@@ -1,0 +1,100 @@
+"""Ha et al.'s task files: loading, the joint-convention check, and ``nehmo evaluate --tasks``."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nehmo_core.errors import InvalidValueError, ModelFileError
+from nehmo_core.eval.cli import main as evaluate_main
+from nehmo_core.eval.ha_tasks import (
+    TOOL_OFFSET,
+    check_joint_convention,
+    load_task,
+    load_tasks,
+    pair_distances,
+)
+from nehmo_core.geometry.pybullet_world import CellWorld
+
+TASKS = Path(__file__).parent / "data" / "ha_tasks"
+
+
+def test_tasks_load_as_cells_with_their_base_poses() -> None:
+    tasks = {t.task_id: t for t in load_tasks(TASKS)}
+    assert {t.arm_count for t in tasks.values()} == {1, 2, 3, 4}
+    four = next(t for t in tasks.values() if t.arm_count == 4)
+    raw = json.loads(four.path.read_text())
+    for arm, (xyz, quat) in zip(four.cell.arms, raw["base_poses"], strict=True):
+        assert arm.base.xyz == pytest.approx(xyz)
+        yaw = 2 * np.arctan2(quat[2], quat[3])
+        assert np.cos(arm.base.yaw - yaw) == pytest.approx(1.0)
+    assert all(0.3 < d < 1.61 for d in pair_distances(four.cell))
+    obstacles = [t for t in tasks.values() if t.obstacles]
+    assert len(obstacles) == 1 and obstacles[0].arm_count == 3
+
+
+def test_their_joint_values_put_our_end_effector_on_their_targets() -> None:
+    for task in load_tasks(TASKS):
+        assert check_joint_convention(task) < 1e-3
+
+
+def test_a_wrong_joint_order_fails_the_convention_check(tmp_path: Path) -> None:
+    data = json.loads((TASKS / "135011.json").read_text())
+    data["goal_config"] = [q[::-1] for q in data["goal_config"]]  # wrist first: wrong order
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(data))
+    with pytest.raises(InvalidValueError, match="goal_config.*ee_link"):
+        check_joint_convention(load_task(bad))
+    assert TOOL_OFFSET > 0
+
+
+def test_bad_task_files_are_rejected_with_the_file_and_entry(tmp_path: Path) -> None:
+    data = json.loads((TASKS / "135011.json").read_text())
+    missing = dict(data)
+    del missing["start_config"]
+    (tmp_path / "missing.json").write_text(json.dumps(missing))
+    with pytest.raises(ModelFileError, match="missing.json.*start_config"):
+        load_task(tmp_path / "missing.json")
+    short = dict(data, start_config=[[0.0] * 5, [0.0] * 6])
+    (tmp_path / "short.json").write_text(json.dumps(short))
+    with pytest.raises(InvalidValueError, match="start_config"):
+        load_task(tmp_path / "short.json")
+    with pytest.raises(InvalidValueError, match="--tasks"):
+        load_tasks(tmp_path / "nowhere")
+
+
+def test_starts_and_goals_are_collision_free_for_our_geometry() -> None:
+    for task in load_tasks(TASKS):
+        with CellWorld(task.cell) as world:
+            for q in (task.scenario.start, task.scenario.goal):
+                world.set_configuration(q)
+                assert not world.in_collision(), task.task_id
+
+
+def test_evaluate_tasks_writes_rows_per_arm_count(tmp_path: Path) -> None:
+    tasks = tmp_path / "tasks"
+    tasks.mkdir()
+    for name in ("135003.json", "135011.json", "135000.json"):  # 1 arm, 2 arms, obstacles
+        shutil.copy(TASKS / name, tasks / name)
+    out = tmp_path / "out"
+    code = evaluate_main(
+        ["--tasks", str(tasks), "--planners", "naive,nehmo", "--out", str(out), "--no-progress"]
+    )
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["skipped"] == [{"task": "135000", "arms": 3, "reason": "obstacles"}]
+    rows = {r["row"]: r for r in summary["rows"]}
+    assert set(rows) == {"naive", "nehmo"}
+    for row in rows.values():
+        assert row["ours"]["episodes"] == 2
+        assert set(row["by_arms"]) == {"1", "2"}
+        assert row["by_arms"]["2"]["episodes"] == 1
+        for key in ("sr", "cr", "stuck_rate", "episodes"):
+            assert key in row["ours"]
+    assert rows["nehmo"]["ours"]["collisions"] == 0
+    assert rows["nehmo"]["by_arms"]["1"]["sr"] == 100.0
+    assert "Ha et al." in (out / "summary.md").read_text()
