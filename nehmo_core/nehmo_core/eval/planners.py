@@ -80,7 +80,7 @@ def build_planners(
     out: dict[str, Planner] = {}
     for arm_id, kind in kinds.items():
         models = registry.models_for(kind, cell) if kind in OPT_KINDS else []
-        if kind in OPT_KINDS and not models:
+        if kind in OPT_KINDS and not models and len(cell.arms) > 1:  # alone: nothing to model
             peers = tuple(a for a in cell.arm_ids if a != arm_id)
             raise _missing_models(cell, arm_id, kind, peers, models, registry)
         planner = make_planner(kind, cell, arm_id, models, settings)

@@ -52,7 +52,7 @@ def make_planner(
 ) -> Planner:
     """A per-arm planner of kind ``kind`` (one of :data:`DECENTRALIZED`)."""
     if kind in OPT:
-        if not models:
+        if not models and len(cell.arms) > 1:  # an arm alone has no pair to model
             raise InvalidValueError("models", f"must hold at least one pair model for {kind!r}", [])
         if kind == "nehmo_wrap":
             settings = (settings or PlannerSettings()).replace(wrap_goal=True)
