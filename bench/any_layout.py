@@ -19,6 +19,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -33,7 +34,7 @@ TAUS = (0.1, 0.3, 0.6)
 EPSILON = 0.05
 
 
-def distance_bands(test: Path) -> list[dict[str, float]]:
+def distance_bands(test: Path) -> list[dict[str, Any]]:
     q, d, _ = load_dataset(test)
     pred = load_distance_model("ur5_ur5_any").distance(q)
     rows = []
@@ -55,7 +56,7 @@ def distance_bands(test: Path) -> list[dict[str, float]]:
     return rows
 
 
-def value_agreement(samples: int, seed: int) -> list[dict[str, float]]:
+def value_agreement(samples: int, seed: int) -> list[dict[str, Any]]:
     conditioned = load_value_function(shipped_value_path("ur5_ur5_any"))
     rng = np.random.default_rng(seed)
     q = rng.uniform(-np.pi, np.pi, (samples, 12))
@@ -92,7 +93,11 @@ def markdown(result: dict[str, object]) -> str:
     ]
     for b in result["distance"]:  # type: ignore[attr-defined]
         fs = "–" if b["false_safe_rate"] is None else f"{100 * b['false_safe_rate']:.2f}"
-        me = "–" if b["mean_abs_error_near_m"] is None else f"{1000 * b['mean_abs_error_near_m']:.1f}"
+        me = (
+            "–"
+            if b["mean_abs_error_near_m"] is None
+            else f"{1000 * b['mean_abs_error_near_m']:.1f}"
+        )
         pe = "–" if b["p95_abs_error_near_m"] is None else f"{1000 * b['p95_abs_error_near_m']:.1f}"
         lines.append(
             f"| {b['band_m'][0]:.2f}–{b['band_m'][1]:.2f} | {b['states']} | {b['colliding']} "
@@ -102,12 +107,14 @@ def markdown(result: dict[str, object]) -> str:
         "",
         f"### Conditioned value vs the fixed-distance value functions ({EPSILON} m level)",
         "",
-        "| fixed model | r m | τ s | mean abs ΔV mm | sign disagreement % | conditioned safe, fixed not % |",
+        "| fixed model | r m | τ s | mean abs ΔV mm | sign disagreement % "
+        "| conditioned safe, fixed not % |",
         "|---|---|---|---|---|---|",
     ]
     for v in result["value"]:  # type: ignore[attr-defined]
         lines.append(
-            f"| {v['fixed_model']} | {v['r_m']:.3f} | {v['tau_s']} | {1000 * v['mean_abs_diff_m']:.1f} "
+            f"| {v['fixed_model']} | {v['r_m']:.3f} | {v['tau_s']} "
+            f"| {1000 * v['mean_abs_diff_m']:.1f} "
             f"| {100 * v['sign_disagreement']:.2f} | {100 * v['conditioned_safe_fixed_not']:.2f} |"
         )
     return "\n".join(lines) + "\n"

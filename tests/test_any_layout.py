@@ -179,13 +179,15 @@ def test_a_pair_closer_than_the_range_is_reported_not_ignored() -> None:
 
     zero = {"a": np.zeros(6), "b": np.zeros(6)}
     with pytest.raises(NehmoError, match="b"):
-        build_planners(cell, {"a": "nehmo", "b": "nehmo"}, Scenario(zero, zero), 0.04, ModelRegistry())
+        build_planners(
+            cell, {"a": "nehmo", "b": "nehmo"}, Scenario(zero, zero), 0.04, ModelRegistry()
+        )
 
 
 def test_device_cuda_without_a_device_is_a_clear_error() -> None:
     if torch.cuda.is_available():
         pytest.skip("a CUDA device is present here")
-    with pytest.raises(InvalidValueError, match="device.*CUDA"):
+    with pytest.raises(InvalidValueError, match=r"device.*CUDA"):
         resolve_device("cuda")
     assert resolve_device("auto").type == "cpu"
     with pytest.raises(InvalidValueError, match="device"):

@@ -47,7 +47,7 @@ def test_a_wrong_joint_order_fails_the_convention_check(tmp_path: Path) -> None:
     data["goal_config"] = [q[::-1] for q in data["goal_config"]]  # wrist first: wrong order
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(data))
-    with pytest.raises(InvalidValueError, match="goal_config.*ee_link"):
+    with pytest.raises(InvalidValueError, match=r"goal_config.*ee_link"):
         check_joint_convention(load_task(bad))
     assert TOOL_OFFSET > 0
 
@@ -57,7 +57,7 @@ def test_bad_task_files_are_rejected_with_the_file_and_entry(tmp_path: Path) -> 
     missing = dict(data)
     del missing["start_config"]
     (tmp_path / "missing.json").write_text(json.dumps(missing))
-    with pytest.raises(ModelFileError, match="missing.json.*start_config"):
+    with pytest.raises(ModelFileError, match=r"missing\.json.*start_config"):
         load_task(tmp_path / "missing.json")
     short = dict(data, start_config=[[0.0] * 5, [0.0] * 6])
     (tmp_path / "short.json").write_text(json.dumps(short))

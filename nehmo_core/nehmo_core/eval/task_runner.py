@@ -96,9 +96,13 @@ def _run(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult, dic
         cell, kinds, task.scenario, 1.0 / settings.rate, registry, config.planner_settings
     )
     used = {
-        "value_models": {k: registry.described.get(k, []) for k in set(kinds.values()) if k in OPT_KINDS},
+        "value_models": {
+            k: registry.described.get(k, []) for k in set(kinds.values()) if k in OPT_KINDS
+        },
         "unmodelled_peers": unmodelled_peers(planners),
-        "epsilon": {a: p.epsilon_source for a, p in planners.items() if isinstance(p, NehmoPlanner)},
+        "epsilon": {
+            a: p.epsilon_source for a, p in planners.items() if isinstance(p, NehmoPlanner)
+        },
     }
     log_path = _log_path(config, row, task)
     remove_bag(log_path)

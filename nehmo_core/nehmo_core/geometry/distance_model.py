@@ -210,7 +210,7 @@ def _config_from_card(card: dict[str, Any]) -> DistanceModelConfig:
         base2_rpy=tuple(c["base2_rpy"]),
         hidden=tuple(c["hidden"]),
         softmin_betas=tuple(c["softmin_betas"]),
-        base2_range=tuple(c["base2_range"]) if c.get("base2_range") else None,  # type: ignore[arg-type]
+        base2_range=tuple(c["base2_range"]) if c.get("base2_range") else None,
     )
 
 

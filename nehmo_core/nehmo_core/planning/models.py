@@ -44,7 +44,7 @@ from nehmo_core.planning.pair_frame import (
     relative_pose,
 )
 from nehmo_core.planning.value_model import PairValueModel
-from nehmo_core.robots.model import Cell, Pose
+from nehmo_core.robots.model import Cell
 
 __all__ = [
     "OPT_KINDS",

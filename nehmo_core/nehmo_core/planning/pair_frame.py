@@ -128,9 +128,7 @@ ModelGeometry = tuple[str, str, Pose] | tuple[str, str, Pose, tuple[float, float
 """``(robot1, robot2, base2[, (r_low, r_high)])`` of a pair model; see the module docstring."""
 
 
-def match_pair(
-    own: ArmSpec, peer: ArmSpec, models: Sequence[ModelGeometry]
-) -> PairMapping | None:
+def match_pair(own: ArmSpec, peer: ArmSpec, models: Sequence[ModelGeometry]) -> PairMapping | None:
     """The first model ``(robot1, robot2, base2[, range])`` the cell pair maps onto, or None."""
     T = relative_pose(own.base, peer.base)
     yaw = _yaw_only(T)
@@ -150,9 +148,7 @@ def match_pair(
             condition = np.array([r_cell])
         yaw_m = _yaw_only(M)
         if np.allclose(T, M, atol=POSITION_TOL):
-            return PairMapping(
-                index, np.zeros(own.robot.dof), np.zeros(peer.robot.dof), condition
-            )
+            return PairMapping(index, np.zeros(own.robot.dof), np.zeros(peer.robot.dof), condition)
         if yaw is None or yaw_m is None or s_own is None or s_peer is None:
             continue
         r, r_m = np.linalg.norm(T[:2, 3]), np.linalg.norm(M[:2, 3])

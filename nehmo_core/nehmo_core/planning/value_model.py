@@ -83,7 +83,9 @@ class PairValueModel:
         if n_first is None:
             robots, base, dofs = (cfg.robot1, cfg.robot2), base2, (distance.n1, distance.n2)
         elif base_range is not None:
-            raise NehmoError(f"value function {name!r}: a swapped conditioned pair is not supported")
+            raise NehmoError(
+                f"value function {name!r}: a swapped conditioned pair is not supported"
+            )
         else:
             robots, base = (cfg.robot2, cfg.robot1), inverse_pose(base2)
             dofs = (distance.n2, distance.n1)

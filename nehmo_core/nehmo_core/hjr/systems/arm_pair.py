@@ -86,7 +86,9 @@ class ArmPairSystem(HJISystem):
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))
         for low, high in self.conditions:
             if not low < high:
-                raise InvalidValueError("conditions", "each (low, high) needs low < high", (low, high))
+                raise InvalidValueError(
+                    "conditions", "each (low, high) needs low < high", (low, high)
+                )
         n = self.n1 + self.n2
         m = len(self.conditions)
         sign = _as_vector(self.symmetry_sign, n, "symmetry_sign")
