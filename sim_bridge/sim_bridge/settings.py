@@ -8,6 +8,7 @@ from typing import Any
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.eval.setups import SUCCESS_NORMS
+from nehmo_core.robots.loader import load_cell
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenario_files import load_scenario_set
 from nehmo_core.sim.scenarios import Scenario, sample_scenario, scenario_rng
@@ -106,7 +107,8 @@ def load_episode(cell: Cell, p: dict[str, Any]) -> tuple[Scenario, dict[str, Any
     """The episode to run (from the scenario file, or drawn from ``seed``/``index``)."""
     if p["scenarios"]:
         scenario_set = load_scenario_set(p["scenarios"])
-        if scenario_set.cell != cell.name:
+        # the set names its cell by shipped name or by YAML path: compare the cells themselves
+        if load_cell(scenario_set.cell).name != cell.name:
             raise InvalidValueError(
                 "scenarios", f"must be a scenario set of cell {cell.name!r}", scenario_set.cell
             )
