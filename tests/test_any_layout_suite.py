@@ -4,7 +4,6 @@ from its file, every pair planned with the pose-conditioned value function."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -16,8 +15,7 @@ from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.eval.planners import build_planners
 from nehmo_core.planning.models import ModelRegistry
 from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set
-from nehmo_core.sim.scenarios import generate_scenario_set
+from nehmo_core.sim.scenario_files import draw_scenario_set, load_scenario_set, save_scenario_set
 from nehmo_ros.suite import run_episode as run_ros_episode
 from nehmo_ros.suite_settings import SuiteSettings
 
@@ -27,7 +25,7 @@ CELL = load_cell(CELL_FILE)
 
 @pytest.fixture(scope="module")
 def scenario_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    scenarios = dataclasses.replace(generate_scenario_set(CELL, 0, 1), cell=str(CELL_FILE))
+    scenarios = draw_scenario_set(str(CELL_FILE), 0, 1)
     return save_scenario_set(scenarios, tmp_path_factory.mktemp("irregular") / "scenarios.json")
 
 

@@ -15,7 +15,6 @@ Needs the ``nehmo_ros`` and ``sim_bridge`` packages and ROS 2 Jazzy's rclpy inst
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import time
 from pathlib import Path
 
@@ -43,8 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from nehmo_core.eval.render import render_episode
     from nehmo_core.robots import load_cell
-    from nehmo_core.sim.scenario_files import save_scenario_set
-    from nehmo_core.sim.scenarios import generate_scenario_set
+    from nehmo_core.sim.scenario_files import draw_scenario_set, save_scenario_set
 
     if args.index < 0:
         raise InvalidValueError("index", "must be >= 0", args.index)
@@ -54,9 +52,7 @@ def run(args: argparse.Namespace) -> int:
     settings = SuiteSettings(planner=args.planner, model=args.model, time_limit=args.time_limit)
     out.mkdir(parents=True, exist_ok=True)
     cell = load_cell(args.cell)
-    scenarios = generate_scenario_set(cell, args.seed, args.index + 1)
-    if Path(args.cell).suffix in (".yaml", ".yml"):  # the nodes load the file itself
-        scenarios = dataclasses.replace(scenarios, cell=str(Path(args.cell).resolve()))
+    scenarios = draw_scenario_set(args.cell, args.seed, args.index + 1)
     scenario_file = save_scenario_set(scenarios, out / "scenarios.json")
     print(
         f"{cell.name}, scenario {args.index} of seed {args.seed}: sim_bridge + "

@@ -27,7 +27,6 @@ summary), :mod:`.replay`; this module is the command line.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -35,9 +34,7 @@ from pathlib import Path
 
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.eval.metrics import aggregate, evaluate_log
-from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set
-from nehmo_core.sim.scenarios import ScenarioSet, generate_scenario_set
+from nehmo_core.sim.scenario_files import draw_scenario_set, load_scenario_set, save_scenario_set
 from nehmo_ros.oneline import one_line
 from nehmo_ros.replay import replay
 from nehmo_ros.suite import format_metrics, run_suite
@@ -60,11 +57,7 @@ def scenario_file_for(args: argparse.Namespace, out_dir: Path) -> Path:
     """The scenario set to run: given, or drawn from ``--seed``/``--count`` and saved."""
     if args.scenarios:
         return Path(args.scenarios).resolve()
-    cell = load_cell(args.cell)
-    scenarios: ScenarioSet = generate_scenario_set(cell, args.seed, args.count)
-    if Path(args.cell).suffix in (".yaml", ".yml"):
-        # the file, not its name, is what the nodes (and a re-run) load
-        scenarios = dataclasses.replace(scenarios, cell=str(Path(args.cell).resolve()))
+    scenarios = draw_scenario_set(args.cell, args.seed, args.count)
     return save_scenario_set(scenarios, out_dir / "scenarios.json").resolve()
 
 

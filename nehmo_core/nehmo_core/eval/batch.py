@@ -30,7 +30,7 @@ from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenarios import Scenario, ScenarioSet
 
-__all__ = ["BatchConfig", "RowRun", "run_rows"]
+__all__ = ["BatchConfig", "RowRun", "init_worker", "run_rows"]
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,8 @@ class RowRun:
 _STATE: dict[str, Any] = {}
 
 
-def _init_worker() -> None:
+def init_worker() -> None:
+    """A pool worker's start: one torch/OpenMP thread (the pool runs one worker per core)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import torch
 
@@ -157,7 +158,7 @@ def _executor(workers: int) -> Executor | None:
     return ProcessPoolExecutor(
         max_workers=workers,
         mp_context=multiprocessing.get_context("spawn"),
-        initializer=_init_worker,
+        initializer=init_worker,
     )
 
 

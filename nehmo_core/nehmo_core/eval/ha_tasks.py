@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
 
 from nehmo_core.errors import InvalidValueError, ModelFileError
 from nehmo_core.geometry.kinematics import ArmKinematics
@@ -81,22 +82,14 @@ def _base_pose(entry: Any, path: Path, index: int) -> Pose:
         raise InvalidValueError(
             f"{path.name}: base_poses[{index}]", "must be [[x, y, z], unit [qx, qy, qz, qw]]", entry
         )
-    qx, qy, qz, qw = quat / np.linalg.norm(quat)
-    roll = math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (qw * qy - qz * qx))))
-    yaw = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    roll, pitch, yaw = Rotation.from_quat(quat).as_euler("xyz")  # fixed axes, as Pose
     return Pose((float(xyz[0]), float(xyz[1]), float(xyz[2])), (roll, pitch, yaw))
 
 
 def _tool_pose(entry: Any) -> np.ndarray:
-    xyz, (qx, qy, qz, qw) = np.asarray(entry[0], float), np.asarray(entry[1], float)
     T = np.eye(4)
-    T[:3, :3] = [
-        [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
-        [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
-        [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)],
-    ]
-    T[:3, 3] = xyz
+    T[:3, :3] = Rotation.from_quat(entry[1]).as_matrix()
+    T[:3, 3] = entry[0]
     return T
 
 
@@ -158,11 +151,7 @@ def tool_offsets(task: HaTask) -> np.ndarray:
         with torch.no_grad():
             ee = kin.link_transforms(q)["ee_link"][0].double().numpy()
         rel = np.linalg.inv(ee) @ target
-        R = rel[:3, :3]
-        angle = math.acos(max(-1.0, min(1.0, (np.trace(R) - 1) / 2)))
-        axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-        rotvec = axis / (2 * math.sin(angle)) * angle if angle > 1e-9 else np.zeros(3)
-        out.append(np.concatenate([rel[:3, 3], rotvec]))
+        out.append(np.concatenate([rel[:3, 3], Rotation.from_matrix(rel[:3, :3]).as_rotvec()]))
     return np.array(out).reshape(-1, 6)
 
 

@@ -14,7 +14,6 @@ obstacles are listed and skipped: the planners model arms only.
 from __future__ import annotations
 
 import multiprocessing
-import os
 import platform
 import time
 from collections.abc import Callable, Sequence
@@ -23,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from nehmo_core.eval.batch import init_worker
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.ha_tasks import HaTask, check_joint_convention, pair_distances
 from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log
@@ -66,13 +66,6 @@ class TaskConfig:
 
 
 _STATE: dict[str, Any] = {}
-
-
-def _init_worker() -> None:
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    import torch
-
-    torch.set_num_threads(1)
 
 
 def _registry(config: TaskConfig) -> ModelRegistry:
@@ -148,7 +141,7 @@ def run_tasks(
         for task in runnable:
             parse_row(row, task.cell)
     executor = (
-        ProcessPoolExecutor(workers, multiprocessing.get_context("spawn"), _init_worker)
+        ProcessPoolExecutor(workers, multiprocessing.get_context("spawn"), init_worker)
         if workers > 1
         else None
     )

@@ -7,6 +7,7 @@ the cell and raises :class:`ScenarioFileError` naming the file and the field.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from collections.abc import Mapping
@@ -18,12 +19,13 @@ import numpy as np
 from nehmo_core.errors import NehmoError
 from nehmo_core.robots.loader import load_cell
 from nehmo_core.robots.model import Cell
-from nehmo_core.sim.scenarios import Scenario, ScenarioSet
+from nehmo_core.sim.scenarios import Scenario, ScenarioSet, generate_scenario_set
 
 __all__ = [
     "SCENARIO_FORMAT",
     "SCENARIO_FORMAT_VERSION",
     "ScenarioFileError",
+    "draw_scenario_set",
     "load_scenario_set",
     "save_scenario_set",
     "scenario_set_from_dict",
@@ -57,6 +59,18 @@ def scenario_set_to_dict(scenarios: ScenarioSet, cell: Cell) -> dict[str, Any]:
             for i, s in zip(scenarios.indices, scenarios.scenarios, strict=True)
         ],
     }
+
+
+def draw_scenario_set(cell_ref: str, seed: int, count: int) -> ScenarioSet:
+    """``count`` scenarios of the cell ``cell_ref`` names (a shipped name or a YAML path).
+
+    A YAML cell is recorded by its absolute path, not its name: that is what every node loading
+    the set (and a later re-run) must load.
+    """
+    scenarios = generate_scenario_set(load_cell(cell_ref), seed, count)
+    if str(cell_ref).endswith((".yaml", ".yml")):
+        scenarios = dataclasses.replace(scenarios, cell=str(Path(cell_ref).resolve()))
+    return scenarios
 
 
 def save_scenario_set(scenarios: ScenarioSet, path: str | os.PathLike[str]) -> Path:
