@@ -3,8 +3,11 @@
 For each model, τ = t_plan (0.1 s) and t_safe (0.3 s), over two distributions: uniform over the
 joint box, and the pair states visited by the ``nehmo`` planner in evaluation episodes of
 development seed 31 (``--episodes-dir``; made by ``nehmo evaluate --planners nehmo --seed 31``
-for dual_ur5, five_ur5 and ur5_kinova_challenging, 20 episodes each). Writes one JSON + Markdown
-per certificate under ``bench/results/certificates/`` and a table ``certificates.md``.
+for dual_ur5, five_ur5 and ur5_kinova_challenging, 20 episodes each) and, for the pose-conditioned
+``ur5_ur5_any``, the ``nehmo`` episodes of Ha et al.'s task files (``ha_tasks``: ``nehmo evaluate
+--tasks ../shared/ha_benchmark/tasks --planners nehmo``), whose layouts span r = 0.31-1.60 m.
+Writes one JSON + Markdown per certificate under ``bench/results/certificates/`` and a table
+``certificates.md``; ``--missing`` skips certificates whose JSON is already there (a resumed run).
 
     OMP_NUM_THREADS=1 ./run python bench/certify_models.py --episodes-dir runs/episodes
 """
@@ -29,6 +32,7 @@ MODELS = [  # (pair, variant, episode setups whose logs hold its pair states)
     ("kinova_ur5", "bc+sym", ("ur5_kinova_challenging",)),
     ("ur5_ur5", "bc", ("dual_ur5", "five_ur5")),
     ("ur5_ur5", "deepreach", ("dual_ur5", "five_ur5")),
+    ("ur5_ur5_any", "bc+sym", ("ha_tasks",)),
 ]
 TAUS = (0.3, 0.1)
 
@@ -39,6 +43,9 @@ def main() -> int:
     parser.add_argument("--samples", type=int, default=3000)
     parser.add_argument("--only", help="comma-separated pair/variant names, e.g. ur5_ur5/bc+sym")
     parser.add_argument("--report-only", action="store_true")
+    parser.add_argument(
+        "--missing", action="store_true", help="only certificates without a JSON in the output"
+    )
     args = parser.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     only = set(args.only.split(",")) if args.only else None
@@ -49,6 +56,9 @@ def main() -> int:
                     continue
                 logs = [a for s in setups for a in ("--logs", str(args.episodes_dir / s))]
                 for dist in ("visited", "uniform"):
+                    slug = f"{pair}_{variant.replace('+', '_')}_{dist}_tau{tau:g}"
+                    if args.missing and (OUT / f"{slug}.json").exists():
+                        continue
                     cmd = ["nehmo", "verify", "--model", pair, "--variant", variant]
                     cmd += [
                         "--tau",

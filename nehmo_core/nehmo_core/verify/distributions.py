@@ -20,8 +20,13 @@ import numpy as np
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
-from nehmo_core.planning.pair_frame import match_pair, pose_from_matrix, relative_pose
-from nehmo_core.robots.model import Pose, wrap_angle
+from nehmo_core.planning.pair_frame import (
+    ModelGeometry,
+    match_pair,
+    pose_from_matrix,
+    relative_pose,
+)
+from nehmo_core.robots.model import wrap_angle
 from nehmo_core.verify.truth import pair_arms
 
 
@@ -75,11 +80,14 @@ class VisitedStates:
         return self.states[rng.integers(0, self.states.shape[0], size=count)]
 
 
-def pair_model_geometry(system: ArmPairSystem) -> tuple[str, str, Pose]:
-    """``(robot 1, robot 2, base of arm 2 seen from arm 1)`` of a shipped arm-pair system."""
+def pair_model_geometry(system: ArmPairSystem) -> ModelGeometry:
+    """``(robot 1, robot 2, base of arm 2 seen from arm 1[, base-distance range])`` of a shipped
+    arm-pair system, as :func:`~nehmo_core.planning.pair_frame.match_pair` takes it."""
     cell, a, b = pair_arms(system.name)
     arm1, arm2 = cell.arm(a), cell.arm(b)
     pose = pose_from_matrix(relative_pose(arm1.base, arm2.base))
+    if system.conditions:
+        return arm1.robot.name, arm2.robot.name, pose, system.conditions[0]
     return arm1.robot.name, arm2.robot.name, pose
 
 
@@ -98,10 +106,11 @@ def visited_pair_states(system: ArmPairSystem, episodes: Sequence[str | Path]) -
                     continue
                 q_own = log.positions[own.arm_id] + mapping.own_shift
                 q_peer = log.positions[peer.arm_id] + mapping.peer_shift
-                pools.append(np.concatenate([q_own, q_peer], axis=1))
+                condition = np.tile(mapping.condition, (q_own.shape[0], 1))  # (T, 0) or (T, 1)
+                pools.append(np.concatenate([wrap_angle(q_own), wrap_angle(q_peer), condition], 1))
     if not pools:
         raise NehmoError(f"no pair of the {len(episodes)} episode logs maps onto {system.name!r}")
-    states = np.asarray(wrap_angle(np.concatenate(pools)), dtype=np.float64)
+    states = np.asarray(np.concatenate(pools), dtype=np.float64)
     return VisitedStates(states, tuple(str(p) for p in episodes))
 
 
