@@ -66,10 +66,15 @@ class Spinner:
         self.executor.add_node(node)
         self.nodes.append(node)
 
-    def spin(self, seconds: float, until: Callable[[], bool] = lambda: False) -> None:
-        """Spin for ``seconds``, or until ``until()`` holds."""
+    def spin(self, seconds: float, until: Callable[[], bool] | None = None) -> bool:
+        """Spin for ``seconds``, or until ``until()`` holds; returns ``until()``'s last value
+        (True without ``until``), so a caller asserts that what it waited for happened."""
         end = time.monotonic() + seconds
-        while time.monotonic() < end and not until():
+        while True:
+            if until is not None and until():
+                return True
+            if time.monotonic() >= end:
+                return until is None
             self.executor.spin_once(timeout_sec=0.01)
 
     def close(self) -> None:

@@ -4,6 +4,7 @@ as ``ros2 run`` builds it, and its controller's ``tick`` is made to raise."""
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import pytest
@@ -37,15 +38,17 @@ def test_a_raising_tick_commands_zero_reports_once_and_the_timer_goes_on(
             ticks[0] += 1
             raise RuntimeError("injected bug")
 
-        nodes.spin(10.0, lambda: planner.command_pub.get_subscription_count() >= 1)
+        assert nodes.spin(30.0, lambda: planner.command_pub.get_subscription_count() >= 1)
+        began = time.monotonic()
         monkeypatch.setattr(planner.controller, "tick", broken)
-        nodes.spin(10.0, lambda: ticks[0] >= 5)  # normally 0.2 s: inside one 2 s throttle interval
-        assert ticks[0] >= 5
-        nodes.spin(10.0, lambda: len(commands) >= 5)
-        assert len(commands) >= 5
+        assert nodes.spin(30.0, lambda: ticks[0] >= 5), ticks[0]
+        assert nodes.spin(30.0, lambda: len(commands) >= 5), len(commands)
         assert all(c == [0.0] * 6 for c in commands)
         err = capfd.readouterr().err
-        assert err.count("tick failed (RuntimeError: injected bug); commanding zero velocity") == 1
+        elapsed = time.monotonic() - began
+        reports = err.count("tick failed (RuntimeError: injected bug); commanding zero velocity")
+        # throttled: at most one report per 2 s interval, however many ticks failed
+        assert 1 <= reports <= 1 + int(elapsed / 2.0), (reports, ticks[0], elapsed)
         monkeypatch.undo()  # the bug goes away: the same timer ticks the real controller again
         calls = [0]
         real = planner.controller.tick
@@ -55,7 +58,6 @@ def test_a_raising_tick_commands_zero_reports_once_and_the_timer_goes_on(
             return real(*args, **kwargs)
 
         monkeypatch.setattr(planner.controller, "tick", counted)
-        nodes.spin(10.0, lambda: calls[0] >= 3)
-        assert calls[0] >= 3
+        assert nodes.spin(30.0, lambda: calls[0] >= 3), calls[0]
         assert "tick failed" not in capfd.readouterr().err
         planner.on_stop()

@@ -69,6 +69,7 @@ class Rig:
     device: Device
     path: Path
     burst: Callable[[int, int], None]
+    spin: Callable[[float, Callable[[], bool]], bool]
 
 
 @pytest.fixture
@@ -91,14 +92,19 @@ def rig(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Rig]:
         nodes.add(talker)
 
         def burst(first: int, count: int) -> None:
-            """Messages ``first`` … at 100 Hz, then 0.5 s (2.5 flush intervals) of silence."""
+            """Messages ``first`` … at 100 Hz; returns once the recorder has taken every message
+            sent so far (the bursts number them from 0 without gaps), written or lost."""
             for k in range(first, first + count):
                 pub.publish(RosJointState(name=["a"], position=[float(k)] + [0.0] * WIDTH))
                 nodes.spin(0.01)
-            nodes.spin(0.5)
 
-        nodes.spin(10.0, lambda: pub.get_subscription_count() >= 1)
-        yield Rig(recorder, devices[0], path, burst)
+            def taken() -> int:
+                return recorder.count + recorder.lost
+
+            assert nodes.spin(30.0, lambda: taken() == first + count), (taken(), first + count)
+
+        assert nodes.spin(30.0, lambda: pub.get_subscription_count() >= 1)
+        yield Rig(recorder, devices[0], path, burst, nodes.spin)
 
 
 def _firsts(path: Path) -> list[float]:
@@ -110,6 +116,7 @@ def test_a_full_disk_is_reported_and_the_log_before_it_recovers(
     rig: Rig, tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
     rig.burst(0, 10)
+    assert rig.spin(30.0, lambda: rig.recorder.writer.pending == 0)  # flushed
     assert (rig.recorder.count, rig.recorder.lost, rig.recorder.writer.pending) == (10, 0, 0)
     rig.device.free = 100  # the disk fills up inside the next chunk, and stays full
     rig.burst(10, 20)  # every callback returns: the node keeps spinning
@@ -128,6 +135,8 @@ def test_a_chunk_torn_by_a_full_disk_ends_a_recovery_instead_of_passing_garbage_
     rig: Rig, tmp_path: Path
 ) -> None:
     rig.burst(0, 10)
+    assert rig.spin(30.0, lambda: rig.recorder.writer.pending == 0)  # flushed
+    assert rig.recorder.lost == 0
     rig.device.free = 100
     rig.burst(10, 20)
     lost = rig.recorder.lost

@@ -26,16 +26,16 @@ def test_messages_are_flushed_after_traffic_stops(tmp_path: Path) -> None:
         pub = talker.create_publisher(RosJointState, joint_states_topic("ur5_0"), 10)
         nodes.add(recorder)
         nodes.add(talker)
-        nodes.spin(10.0, lambda: pub.get_subscription_count() >= 1)
+        assert nodes.spin(30.0, lambda: pub.get_subscription_count() >= 1)
         nodes.spin(0.3)  # past the first flush interval
         for k in range(5):
             pub.publish(RosJointState(name=NAMES, position=[0.1 * k, 0.0]))
-        nodes.spin(5.0, lambda: recorder.count >= 5)
+        assert nodes.spin(30.0, lambda: recorder.count >= 5), recorder.count
         assert recorder.count == 5
-        nodes.spin(0.5)  # silence: 2.5 flush intervals
+        # silence: only the flush timer can empty the writer now
+        assert nodes.spin(30.0, lambda: recorder.writer.pending == 0), recorder.writer.pending
         fixed = tmp_path / "fixed"
         recover(path, fixed)  # the file as a SIGKILL now would leave it
         states = [r for r in read_log(fixed) if r.topic == joint_states_topic("ur5_0")]
         assert [r.message.position[0] for r in states] == [0.1 * k for k in range(5)]  # type: ignore[union-attr]
-        assert recorder.writer.pending == 0
         recorder.on_stop()

@@ -17,8 +17,10 @@ aggregate (SR, CR, planning time, MPL) go to ``<out>/summary.json``. Process out
 ``<out>/logs/<episode>/`` (``commands.json`` there holds every process's command line).
 
 ``replay`` republishes a bag's topics through rclpy with their recorded timing (scaled by
-``--rate``), for inspection with other tools or re-recording; ``evaluate`` prints the metrics of
-bags.
+``--rate``), for inspection with other tools or re-recording; it starts after ``--wait`` s of
+discovery or, with ``--min-subscribers N``, as soon as every topic's publisher has N
+subscriptions (an error if not within ``--wait`` s), and after the last message waits up to
+``--wait`` s for reliable subscribers to acknowledge. ``evaluate`` prints the metrics of bags.
 
 The pieces: :mod:`.suite_settings`, :mod:`.processes`, :mod:`.suite` (episodes and the
 summary), :mod:`.replay`; this module is the command line.
@@ -91,7 +93,18 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--topics", nargs="*", help="only these topics")
     rp.add_argument("--domain-id", type=int)
     rp.add_argument(
-        "--wait", type=float, default=1.0, help="[s] for discovery before the first message"
+        "--wait",
+        type=float,
+        default=1.0,
+        help="[s] for discovery before the first message (at most, with --min-subscribers) "
+        "and for reliable subscribers to acknowledge the last ones",
+    )
+    rp.add_argument(
+        "--min-subscribers",
+        type=int,
+        default=0,
+        help="start once every topic's publisher has this many subscriptions, an error if not "
+        "within --wait (default 0: wait --wait s)",
     )
     return parser
 
@@ -148,7 +161,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(format_metrics(aggregate(results).to_dict()))
             return 0
         with _readable(args.log):
-            return replay(Path(args.log), args.rate, args.topics, args.domain_id, args.wait)
+            return replay(
+                Path(args.log),
+                args.rate,
+                args.topics,
+                args.domain_id,
+                args.wait,
+                args.min_subscribers,
+            )
     except (NehmoError, OSError) as exc:
         print(f"orchestrate: error: {one_line(exc)}", file=sys.stderr)
         return 2
