@@ -26,6 +26,7 @@ from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.metrics import EpisodeResult
 from nehmo_core.eval.planners import build_planners
 from nehmo_core.planning.models import ModelRegistry, parse_value_models
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import save_scenario_set
 from nehmo_core.sim.scenarios import generate_scenario_set
@@ -92,7 +93,8 @@ def batch(scenario_file: Path) -> EpisodeResult:
     scenario = load_scenario_set(scenario_file).scenarios[INDEX]
     registry = ModelRegistry(parse_value_models(["synthetic"]))
     kinds = dict.fromkeys(CELL.arm_ids, "nehmo")
-    planners = build_planners(CELL, kinds, scenario, 0.04, registry)
+    unhurried = PlannerSettings(deadline=3600.0)  # the reference: no solve cut short by load
+    planners = build_planners(CELL, kinds, scenario, 0.04, registry, unhurried)
     return run_episode(CELL, scenario, planners, EpisodeSettings(), kinds=kinds)
 
 
@@ -138,7 +140,7 @@ def test_metrics_equal_the_batch_runner_within_tolerance(suite: Any, batch: Epis
     # starved solve becomes fail-safe steps, so only the time limit bounds it.
     assert ros.end_time < 20.0, (ros.end_time, batch.end_time)
     # Real-time runs can miss a solve deadline near contact; the fail-safe steps that follow
-    # lengthen the path (seen up to 1.7x the lock-step batch run), never shorten it much.
+    # lengthen the path by a bounded share of fail-safe steps, never shorten it much.
     assert 0.65 * batch.path_length <= ros.path_length <= 2.0 * batch.path_length
 
 

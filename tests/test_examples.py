@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -24,7 +25,12 @@ def _run(script: str, *args: str, cwd: Path) -> str:
 
 
 def test_every_example_is_tested() -> None:
-    tested = {"01_value_slice.py", "02_batch_episode.py", "03_node_suite.py"}
+    tested = {
+        "01_value_slice.py",
+        "02_batch_episode.py",
+        "03_node_suite.py",
+        "04_verify_model.py",
+    }
     assert {p.name for p in EXAMPLES.glob("*.py")} == tested
 
 
@@ -52,3 +58,12 @@ def test_03_runs_the_node_suite_on_a_custom_cell(tmp_path: Path) -> None:
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["episodes"]) == 1
     assert summary["episodes"][0]["outcome"] in ("success", "collision", "stuck")
+
+
+def test_04_certifies_a_shipped_model(tmp_path: Path) -> None:
+    stdout = _run("04_verify_model.py", "--samples", "150", "--alpha", "0.1", cwd=tmp_path)
+    assert "model ur5_ur5 (bc+sym), τ = 0.3 s, uniform states" in stdout
+    rollouts = re.search(r"(\d+) of 150 rollouts in contact", stdout)
+    bound = re.search(r"violation probability ≤ ([0-9.]+) at confidence 0.999", stdout)
+    assert rollouts is not None and bound is not None, stdout
+    assert float(bound.group(1)) > int(rollouts.group(1)) / 150  # a bound above the rate seen

@@ -67,7 +67,7 @@ def _files(root: Path) -> None:
     _sidecar(_model_dir(root, "future"), format_version=99)
     _sidecar(_model_dir(root, "no_card"), system=None)
     _model_dir(root, "other_pair", "ur5_kinova")
-    (root / "garbage.mcap").write_bytes(b"not an MCAP file" + os.urandom(200))
+    (root / "garbage.mcap").write_bytes(b"not an MCAP file" + bytes(range(200)))
     (root / "exists.mcap").write_bytes(b"keep me")
     save_scenario_set(generate_scenario_set(load_cell("triple_ur5"), 0, 1), root / "triple.json")
     dual = save_scenario_set(generate_scenario_set(load_cell("dual_ur5"), 0, 1), root / "dual.json")
@@ -222,8 +222,12 @@ def test_loading_a_model_never_runs_pickled_code(root: Path, results: dict) -> N
     from nehmo_ros.planners import build_planner
 
     assert results["pickle_model"][0] == 2  # the node, given a pickle
-    for model in ("disguised", "weights.pt"):  # and the loader, given one under either name
-        with pytest.raises(NehmoError):
+    refusals = {  # the loader, given one under either name
+        "disguised": "cannot read weights file",
+        "weights.pt": "expected a run directory or a .safetensors file",
+    }
+    for model, refusal in refusals.items():
+        with pytest.raises(NehmoError, match=refusal):
             build_planner(
                 "nehmo", load_cell("dual_ur5"), "ur5_0", str(root / model), PlannerSettings()
             )

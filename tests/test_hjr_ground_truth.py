@@ -62,7 +62,12 @@ def test_cache_reuses_solution(coarse: tuple[GroundTruth, Path]) -> None:
 def test_validate_reports_errors(coarse: tuple[GroundTruth, Path]) -> None:
     truth, _ = coarse
     system = Air3D()
-    network = ValueNetwork(system, "bc", NetworkSettings(width=8, hidden_layers=1))
+    network = ValueNetwork(
+        system,
+        "bc",
+        NetworkSettings(width=8, hidden_layers=1),
+        generator=torch.Generator().manual_seed(0),
+    )
     with torch.no_grad():
         network.siren.output.weight.zero_()
         network.siren.output.bias.zero_()

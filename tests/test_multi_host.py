@@ -59,7 +59,7 @@ STOP_TIMEOUT = 10.0  # [s] after SIGINT before SIGKILL
 PREFIX = f"nehmo-mh-{os.getpid()}-"  # every namespace of this test run starts with it
 SUBNET = "10.231.0"
 DEVICE = "eth0"  # a host's end of its veth (in the host's namespace)
-MIN_RX_BYTES = 100_000  # every host receives more than this during the episode (~1 MB seen)
+MIN_RX_BYTES = 100_000  # every host receives more than this (an episode moves about 1 MB)
 
 
 def ip(*args: str) -> str:
@@ -315,7 +315,9 @@ def test_the_traffic_crossed_the_veths(multi_host: MultiHostRun) -> None:
 
 def test_no_namespace_of_the_test_remains(request: pytest.FixtureRequest) -> None:
     run = None
-    with suppress(Exception):  # a failed run must have cleaned up as well
+    # the run's own failure is reported by the tests that use it; a failed run must have
+    # cleaned up as well, which is what this test checks
+    with suppress(Exception):
         run = request.getfixturevalue("multi_host")
     assert own_namespaces() == []
     if run is not None:

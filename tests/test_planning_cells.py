@@ -220,7 +220,10 @@ def test_nehmo_on_both_arms_of_the_ur5_kinova_cell() -> None:
         scenario = sample_scenario(cell, scenario_rng(0, 0), sim.world)
         naive = {a: NaivePlanner(cell, a) for a in cell.arm_ids}
         assert run_episode(cell, scenario, naive, settings, simulator=sim).outcome == "collision"
-        planners = build_planners(cell, kinds, scenario, 1 / settings.rate, ModelRegistry())
+        unhurried = PlannerSettings(deadline=3600.0)  # no solve is cut short on a loaded machine
+        planners = build_planners(
+            cell, kinds, scenario, 1 / settings.rate, ModelRegistry(), unhurried
+        )
         kinova, ur5 = planners["kinova_0"], planners["ur5_0"]
         assert isinstance(kinova, NehmoPlanner) and isinstance(ur5, NehmoPlanner)
         own_model = kinova.models[kinova.pairs["ur5_0"].model_index]

@@ -36,9 +36,10 @@ def _states(n: int, count: int, seed: int) -> np.ndarray:
 @pytest.mark.parametrize("pair", ["ur5_ur5", "ur5_kinova"])
 def test_distance_graph_matches_torch_value_and_gradient(pair: str) -> None:
     model = proxy_distance_model(pair)
+    gen = torch.Generator().manual_seed(6)
     with torch.no_grad():  # a generic MLP, not only the pass-through of the proxy
         for p in model.mlp.parameters():
-            p.add_(0.05 * torch.randn_like(p))
+            p.add_(0.05 * torch.randn(p.shape, generator=gen))
     fn = distance_function(model)
     q = _states(model.dof, 20, 1)
     ref_v, ref_g = model.distance_and_gradient(q)
@@ -143,7 +144,7 @@ def test_export_names_a_boundary_it_cannot_export() -> None:
         train_region=system.train_region,
         system_name="odd_pair",
     )
-    network = ValueNetwork(odd, "bc", SMALL)
+    network = ValueNetwork(odd, "bc", SMALL, generator=torch.Generator().manual_seed(0))
     with pytest.raises(NehmoError, match=r"'odd_pair'.*SwappedBoundary around a Identity"):
         PairValueModel.from_value_function(ValueFunction(network), "test_odd", backend="vm")
 
@@ -189,7 +190,7 @@ def test_falls_back_to_the_vm_without_a_compiler(tmp_path, monkeypatch) -> None:
     with pytest.warns(RuntimeWarning, match="VM"):
         result = compile_function(value_grad, "auto")
     assert result.backend == "vm"
-    with pytest.raises(OSError):
+    with pytest.raises(FileNotFoundError, match="no-such-compiler"):
         compile_function(value_grad, "compiled")
     with pytest.raises(UnknownNameError, match="auto"):
         compile_function(value_grad, "jit")

@@ -30,6 +30,7 @@ from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenarios import sample_configuration
 
 CELL = load_cell("dual_ur5")
+UNHURRIED = PlannerSettings(deadline=3600.0)  # statuses never depend on the machine's load
 OWN, PEER = "ur5_0", "ur5_1"
 
 
@@ -50,7 +51,7 @@ def _near_contact(model: PairValueModel, seed: int, count: int) -> list[tuple[np
     """
     rng = np.random.default_rng(seed)
     robot = CELL.arm(OWN).robot
-    planner = NehmoPlanner(CELL, OWN, [model])
+    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     out = []
     while len(out) < count:
         q1, q2 = sample_configuration(robot, rng), sample_configuration(robot, rng)
@@ -78,7 +79,7 @@ def test_worst_case_disturbance_is_the_box_corner_minimizer() -> None:
 
 
 def test_planner_predicts_peers_with_the_brute_force_worst_case(model: PairValueModel) -> None:
-    planner = NehmoPlanner(CELL, OWN, [model])
+    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     q1, q2, goal = _near_contact(model, 1, 1)[0]
     now = planner._current(q1, {PEER: q2})
     problem = planner._problem(q1 - goal, now)
@@ -143,7 +144,7 @@ def test_qp_step_reports_infeasibility() -> None:
 
 
 def test_safe_unconstrained_step_equals_the_naive_step(model: PairValueModel) -> None:
-    planner = NehmoPlanner(CELL, OWN, [model])
+    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     naive = NaivePlanner(CELL, OWN)
     q1 = np.array([0.0, -2.4, 1.5, -1.6, -1.5, 0.0])  # arms folded away from each other
     q2 = q1.copy()
@@ -158,7 +159,7 @@ def test_safe_unconstrained_step_equals_the_naive_step(model: PairValueModel) ->
 def test_a_nan_row_at_the_naive_step_is_not_taken_for_a_safe_one(model, in_c) -> None:
     """A row that evaluates to NaN (here a linear row with a NaN bound; a network could
     overflow) is not satisfied: the naive step is not returned, whatever the other rows say."""
-    planner = NehmoPlanner(CELL, OWN, [model])
+    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     q1 = np.array([0.0, -2.4, 1.5, -1.6, -1.5, 0.0])  # the V row far from active
     problem = planner._problem(np.full(6, -0.01), planner._current(q1, {PEER: q1.copy()}))
     assert solve_sqp(problem, np.zeros(6), native=in_c).status == "naive"
@@ -187,7 +188,7 @@ def test_constraint_holds_at_the_solution_against_an_adversarial_peer(
 
 
 def test_sqp_returns_the_ipopt_solution(model: PairValueModel) -> None:
-    planner = NehmoPlanner(CELL, OWN, [model])
+    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     reference = IpoptSolver(tol=1e-10, max_iter=300)
     compared = 0
     for q1, q2, goal in _near_contact(model, 4, 40):
@@ -218,7 +219,7 @@ def _multi_peer_problems(
     pair, or (``two_contacts``) of its two most critical pairs at once, so the solution may
     slide along one level set into the other."""
     five = load_cell("five_ur5")
-    planner = NehmoPlanner(five, "ur5_0", [model])
+    planner = NehmoPlanner(five, "ur5_0", [model], UNHURRIED)
     assert len(planner.pairs) == 4
     rng = np.random.default_rng(seed)
     out = []
@@ -407,7 +408,7 @@ def test_c_loop_returns_the_python_loops_answers(model) -> None:
     loop = native.loop()
     assert loop is not None, "the C loop must build and pass its DAQP check here"
     assert loop.model(model) is not None  # so the solves below do run in C
-    planner = NehmoPlanner(CELL, OWN, [model])
+    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     problems = []
     for q1, q2, goal in _near_contact(model, 5, 15):
         now = planner._current(q1, {PEER: q2})
@@ -497,7 +498,7 @@ def test_c_loop_steps_aside_for_models_without_generated_code(model) -> None:
     on_vm = replace(model, library=None)
     assert native.loop() is not None
     assert native.loop().model(on_vm) is None
-    planner = NehmoPlanner(CELL, OWN, [on_vm])
+    planner = NehmoPlanner(CELL, OWN, [on_vm], UNHURRIED)
     q1, q2, goal = _near_contact(model, 6, 1)[0]
     problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
     _assert_same_solve(
@@ -506,7 +507,7 @@ def test_c_loop_steps_aside_for_models_without_generated_code(model) -> None:
 
 
 def test_c_loop_reports_a_passed_deadline(model) -> None:
-    planner = NehmoPlanner(CELL, OWN, [model])
+    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     q1, q2, goal = _near_contact(model, 7, 1)[0]
     problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
     late = solve_sqp(problem, np.zeros(6), deadline=time.perf_counter() - 1.0)
@@ -523,7 +524,7 @@ def test_sqp_screen_setting_is_validated() -> None:
 
 
 def test_default_ipopt_settings_agree_with_sqp_within_their_tolerance(model) -> None:
-    planner = NehmoPlanner(CELL, OWN, [model])
+    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     paper = IpoptSolver()  # tol 1e-3, max_iter 30, limited-memory Hessian
     for q1, q2, goal in _near_contact(model, 5, 10):
         problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
@@ -657,7 +658,7 @@ def test_paper_preset_and_kind_have_no_escape(model) -> None:
     ("solver", "status"), [(_Failing(), "failed"), (_Crashing(), "failed (RuntimeError)")]
 )
 def test_fail_safe_fires_on_solver_failure(model, value_function, solver, status) -> None:
-    planner = NehmoPlanner(CELL, OWN, [model], solver=solver)
+    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED, solver=solver)
     q1, q2, goal = _near_contact(model, 6, 1)[0]
     result = planner.plan(q1, {PEER: q2}, goal)
     assert result.telemetry.fail_safe and result.telemetry.status == status
@@ -684,7 +685,7 @@ class _Recording:
 
 def test_a_solve_starts_at_the_last_solution_or_after_a_fail_safe_at_the_naive_step(model) -> None:
     solver = _Recording(fail={1})
-    planner = NehmoPlanner(CELL, OWN, [model], solver=solver)
+    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED, solver=solver)
     q1, q2, goal = _near_contact(model, 6, 1)[0]
     results = []
     for _ in range(4):
@@ -728,7 +729,7 @@ def test_fail_safe_deadband_stills_only_the_joints_that_barely_change_v(
 
 def test_fail_safe_picks_the_most_critical_of_several_peers(model) -> None:
     cell = load_cell("triple_ur5")
-    planner = NehmoPlanner(cell, "ur5_0", [model], solver=_Failing())
+    planner = NehmoPlanner(cell, "ur5_0", [model], UNHURRIED, solver=_Failing())
     rng = np.random.default_rng(8)
     robot = cell.arm("ur5_0").robot
     q = {a: sample_configuration(robot, rng) for a in cell.arm_ids}
@@ -770,9 +771,11 @@ def test_unknown_choices_list_the_valid_ones(model) -> None:
     with pytest.raises(InvalidValueError, match="`t_safe`"):
         NehmoPlanner(CELL, OWN, [model], PlannerSettings(t_safe=0.7))
     with pytest.raises(InvalidValueError, match="`q_self`"):
-        NehmoPlanner(CELL, OWN, [model]).plan(np.zeros(5), {PEER: np.zeros(6)}, np.zeros(6))
+        NehmoPlanner(CELL, OWN, [model], UNHURRIED).plan(
+            np.zeros(5), {PEER: np.zeros(6)}, np.zeros(6)
+        )
     with pytest.raises(InvalidValueError, match="`peers`"):
-        NehmoPlanner(CELL, OWN, [model]).plan(np.zeros(6), {}, np.zeros(6))
+        NehmoPlanner(CELL, OWN, [model], UNHURRIED).plan(np.zeros(6), {}, np.zeros(6))
 
 
 class _Switchable:
@@ -858,9 +861,9 @@ def test_batched_joint_vectors_are_rejected_naming_the_parameter(model, entry, p
     rule = re.escape(f"`{parameter}` must be one joint vector, shape (6,), not a batch; got (1, 6)")
     with pytest.raises(InvalidValueError, match=rule):
         if entry == "plan":
-            NehmoPlanner(CELL, OWN, [model]).plan(q_self, peers, q_goal)
+            NehmoPlanner(CELL, OWN, [model], UNHURRIED).plan(q_self, peers, q_goal)
         elif entry == "fail_safe":
-            NehmoPlanner(CELL, OWN, [model]).fail_safe(q_self, peers)
+            NehmoPlanner(CELL, OWN, [model], UNHURRIED).fail_safe(q_self, peers)
         elif entry == "naive":
             NaivePlanner(CELL, OWN).plan(q_self, peers, q_goal)
         else:
@@ -902,7 +905,10 @@ def test_whole_counts_and_seeds_are_accepted() -> None:
 def test_the_fail_safe_and_the_solve_of_one_state_share_one_evaluation(model) -> None:
     """A node asks for the fail-safe ahead of each solve from the same state: the solve reuses
     that evaluation of V at t_plan and answers as a planner that was not asked first."""
-    planner, fresh = NehmoPlanner(CELL, OWN, [model]), NehmoPlanner(CELL, OWN, [model])
+    planner, fresh = (
+        NehmoPlanner(CELL, OWN, [model], UNHURRIED),
+        NehmoPlanner(CELL, OWN, [model], UNHURRIED),
+    )
     q1, q2, goal = _near_contact(model, 8, 1)[0]
     evaluations = []
     evaluate = planner._evaluate_current

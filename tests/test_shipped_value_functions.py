@@ -35,10 +35,11 @@ def _states(vf, count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:  # type
 
 
 @pytest.mark.parametrize(("name", "variant"), SHIPPED)
-def test_model_card_names_its_model(name: str, variant: str) -> None:
+def test_shipped_weights_load_as_the_named_model(name: str, variant: str) -> None:
+    vf = load_value_function(name, variant=variant)
+    assert vf.system.name == name and vf.network.variant == variant
     card = json.loads(shipped_value_path(name, variant).with_suffix(".json").read_text())
-    assert card["system"]["name"] == name
-    assert card["settings"]["variant"] == variant
+    assert card["system"]["name"] == name and card["settings"]["variant"] == variant
 
 
 @pytest.mark.parametrize(("name", "variant"), [s for s in SHIPPED if s[1] == "bc+sym"])

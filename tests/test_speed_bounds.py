@@ -59,7 +59,7 @@ def models() -> list:
 
 
 def test_an_arm_at_its_goal_announces_and_keeps_its_bound(models: list) -> None:
-    planner = NehmoPlanner(CELL, OWN, models, PlannerSettings(hold_bound=0.2))
+    planner = NehmoPlanner(CELL, OWN, models, PlannerSettings(hold_bound=0.2, deadline=3600.0))
     q_own = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])  # both arms turned away: V ≈ 0.44 m
     far = {PEER: np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])}
     goal = q_own + 0.02
@@ -123,7 +123,9 @@ def _run(planner: NehmoPlanner, q1, q2, goal, bound: float, announce: bool) -> t
 def test_planning_against_an_announced_bound_is_safe_and_less_conservative(models: list) -> None:
     # ε fixed at 0.05 m: the pushing states below are drawn for that margin (V ≥ 0.08 m at full
     # speed), which a certified ε above 0.08 m would make infeasible from the start
-    planner = NehmoPlanner(CELL, OWN, models, PlannerSettings(certified_epsilon=False))
+    planner = NehmoPlanner(
+        CELL, OWN, models, PlannerSettings(certified_epsilon=False, deadline=3600.0)
+    )
     bound = 0.2
     told, untold = [], []
     for q1, q2, goal in _pushing_states(planner, bound, 8):
@@ -143,7 +145,7 @@ def test_a_settled_arm_withdraws_its_bound_from_a_peer_that_breaks_the_slow_game
     """A peer that announces nothing and comes closer than a NeHMO peer planning against the
     bound would (``V(k·t_plan) < ε``) is fled from at full speed after the withdrawal; the
     same state from a peer that keeps a bound of its own is no reason to withdraw."""
-    settings = PlannerSettings(hold_bound=0.2)
+    settings = PlannerSettings(hold_bound=0.2, deadline=3600.0)
     q_own = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
     far = {PEER: np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])}
     close = {PEER: np.array([0.0, -1.2, 1.0, 0.0, 0.0, 0.0])}  # turned toward the arm: V < ε
