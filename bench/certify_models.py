@@ -1,6 +1,8 @@
 """Certificates for every shipped value function (``nehmo verify``), recorded in their model cards.
 
-For each model, τ = t_plan (0.1 s) and t_safe (0.3 s), over two distributions: uniform over the
+For each model, τ = t_plan (0.1 s) and t_safe (0.3 s), and for the planner's ``bc+sym`` models
+also τ = hold_bound·t_safe (0.06 s: the horizon at which peers that announced a speed bound are
+planned against), over two distributions: uniform over the
 joint box, and the pair states visited by the ``nehmo`` planner in evaluation episodes of
 development seed 31 (``--episodes-dir``; made by ``nehmo evaluate --planners nehmo --seed 31``
 for dual_ur5, five_ur5 and ur5_kinova_challenging, 20 episodes each) and, for the pose-conditioned
@@ -20,6 +22,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.verify.report import certificates_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,6 +38,8 @@ MODELS = [  # (pair, variant, episode setups whose logs hold its pair states)
     ("ur5_ur5_any", "bc+sym", ("ha_tasks",)),
 ]
 TAUS = (0.3, 0.1)
+_DEFAULTS = PlannerSettings()
+SLOW_TAU = round(_DEFAULTS.hold_bound * _DEFAULTS.t_safe, 6)  # a settled peer's rows [s]
 
 
 def main() -> int:
@@ -50,9 +55,11 @@ def main() -> int:
     OUT.mkdir(parents=True, exist_ok=True)
     only = set(args.only.split(",")) if args.only else None
     if not args.report_only:
-        for tau in TAUS:
+        for tau in (*TAUS, SLOW_TAU):
             for pair, variant, setups in MODELS:
                 if only and f"{pair}/{variant}" not in only:
+                    continue
+                if tau == SLOW_TAU and variant != "bc+sym":
                     continue
                 logs = [a for s in setups for a in ("--logs", str(args.episodes_dir / s))]
                 for dist in ("visited", "uniform"):

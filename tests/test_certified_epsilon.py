@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from nehmo_core.hjr import NetworkSettings
@@ -58,3 +59,42 @@ def test_paper_rows_keep_the_fixed_epsilon(model: PairValueModel) -> None:
     certified = dataclasses.replace(model, certificates=(_cert(0.3, 0.09),))
     assert _planner(certified, "nehmo_paper").settings.epsilon == pytest.approx(0.05)
     assert _planner(certified, certified_epsilon=False).settings.epsilon == pytest.approx(0.05)
+
+
+def test_each_model_keeps_its_own_certified_level(model: PairValueModel) -> None:
+    loose = dataclasses.replace(model, certificates=(_cert(0.3, 0.09),))
+    tight = dataclasses.replace(model, name="tight", certificates=(_cert(0.3, 0.0),))
+    planner = make_planner("nehmo", load_cell("dual_ur5"), "ur5_0", [loose, tight])
+    assert isinstance(planner, NehmoPlanner)
+    assert planner.settings.epsilon == pytest.approx(0.09)  # the cell-wide ε: the largest δ
+    assert planner.group_margin(0, 1.0) == pytest.approx(0.09)
+    assert planner.group_margin(1, 1.0) == pytest.approx(0.05)  # the floor, not the other's δ
+
+
+def test_rows_against_a_slow_peer_keep_the_level_certified_at_their_horizon(
+    model: PairValueModel,
+) -> None:
+    certs = (_cert(0.3, 0.09), _cert(0.1, 0.07), _cert(0.06, 0.02), _cert(0.06, 0.06, "uniform"))
+    planner = _planner(dataclasses.replace(model, certificates=certs))
+    assert planner.group_margin(0, 0.2) == pytest.approx(0.06)  # τ = 0.06: the larger δ there
+    assert planner.group_margin(0, 0.3) == pytest.approx(0.07)  # τ = 0.09: the 0.1 s level
+    assert planner.group_margin(0, 0.5) == pytest.approx(0.09)  # τ = 0.15: the 0.3 s level
+    low = dataclasses.replace(model, certificates=(_cert(0.3, 0.09), _cert(0.06, 0.01)))
+    assert _planner(low).group_margin(0, 0.2) == pytest.approx(0.05)  # never below the floor
+    paper = _planner(dataclasses.replace(model, certificates=certs), "nehmo_paper")
+    assert paper.group_margin(0, 0.2) == paper.group_margin(0, 1.0) == pytest.approx(0.05)
+
+
+def test_a_slow_peers_rows_carry_their_margin_into_opt(model: PairValueModel) -> None:
+    certs = (_cert(0.3, 0.09), _cert(0.06, 0.0))
+    planner = _planner(dataclasses.replace(model, certificates=certs))
+    q = np.zeros(6)
+    for bound, margin in ((1.0, 0.09), (0.2, 0.05)):
+        now = planner._current(q, {"ur5_1": q}, {"ur5_1": bound})
+        problem = planner._problem(q - 0.5, now)
+        assert problem.constraints.margins == pytest.approx((margin,))
+        cons = problem.constraints
+        c, _ = cons.evaluate(np.zeros(6))
+        v, _ = cons.models[0].evaluate(cons.horizon(0), cons.groups[0][1])
+        assert cons.horizon(0) == pytest.approx(bound * 0.3)
+        assert c[0] == pytest.approx(v[0] - margin, abs=1e-12)  # the row is V minus its margin

@@ -326,7 +326,9 @@ def test_an_infeasible_linearization_at_the_warm_start_is_not_taken_for_an_infea
 def test_an_infeasible_opt_is_reported_after_every_start(model) -> None:
     """No step reaches ``V ≥ ε`` when ε exceeds any value: every start's first QP is infeasible."""
     problem = _multi_peer_problems(model, 12, 1)[0]
-    hopeless = replace(problem, constraints=replace(problem.constraints, epsilon=50.0))
+    hopeless = replace(
+        problem, constraints=replace(problem.constraints, epsilon=50.0, margins=None)
+    )
     warm = np.full(6, 0.5 * problem.y_max)
     result = solve_sqp(hopeless, warm)
     assert result.status == "infeasible"
@@ -339,7 +341,9 @@ def test_the_naive_steps_rows_are_evaluated_once(model, monkeypatch) -> None:
     """The naive step's rows, evaluated for the safety check, serve a start from the naive step
     (the first start or a restart): an infeasible Opt costs one evaluation per distinct start."""
     problem = _multi_peer_problems(model, 12, 1)[0]
-    hopeless = replace(problem, constraints=replace(problem.constraints, epsilon=50.0))
+    hopeless = replace(
+        problem, constraints=replace(problem.constraints, epsilon=50.0, margins=None)
+    )
     calls = []
     evaluate = Constraints.evaluate
     monkeypatch.setattr(
@@ -438,7 +442,8 @@ def other(model) -> PairValueModel:
 
 def test_c_loop_evaluates_several_models_like_the_python_loop(model, other) -> None:
     """Peers split between two pair models (two groups of rows, two generated functions), each
-    group at its own time-to-go (as for a peer that keeps an announced speed bound)."""
+    group at its own time-to-go (as for a peer that keeps an announced speed bound) and with its
+    own margin (each model's certified level)."""
     loop = native.loop()
     assert loop is not None and loop.model(model) is not None and loop.model(other) is not None
     optimal = 0
@@ -448,13 +453,20 @@ def test_c_loop_evaluates_several_models_like_the_python_loop(model, other) -> N
         split = replace(
             problem,
             constraints=replace(
-                problem.constraints, models=[model, other], groups=groups, horizons=(0.3, 0.12)
+                problem.constraints,
+                models=[model, other],
+                groups=groups,
+                horizons=(0.3, 0.12),
+                margins=(0.05, 0.08),
             ),
         )
         for screen in (None, 0.1):
             py = solve_sqp(split, np.zeros(6), screen=screen, native=False)
             _assert_same_solve(solve_sqp(split, np.zeros(6), screen=screen), py)
             optimal += py.status == "optimal"
+            if py.status == "optimal":  # each group keeps its own margin, not the other's
+                values, _ = split.constraints.evaluate(py.y)
+                assert values.min() >= -1e-7
     assert optimal >= 4
 
 

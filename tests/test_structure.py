@@ -100,3 +100,28 @@ def test_source_files_are_short_and_say_what_they_hold() -> None:
     for path in _sources():
         doc = ast.get_docstring(ast.parse(path.read_text()))
         assert doc and doc.strip(), f"{path.relative_to(ROOT)} has no module docstring"
+
+
+def test_readme_layout_names_every_package_and_subpackage() -> None:
+    layout = (ROOT / "README.md").read_text().split("## Layout", 1)[1].split("\n## ", 1)[0]
+    packages = sorted(
+        str(init.parent.relative_to(ROOT))
+        for package in PACKAGES
+        for init in package.rglob("__init__.py")
+        if ".venv" not in init.parts
+    )
+    named = {
+        line.split("`")[1].rstrip("/") for line in layout.splitlines() if line.startswith("| `")
+    }
+    # a project's own package directory (nehmo_ros/nehmo_ros) is named by the project's row
+    inner = {
+        p for p in packages if p.split("/")[-1] == p.split("/")[0] and p.split("/")[0] in named
+    }
+    missing = [p for p in packages if p not in named and p not in inner]
+    assert not missing, f"README Layout lacks {missing}"
+
+
+def test_readme_limitations_are_short() -> None:
+    text = (ROOT / "README.md").read_text().split("## Limitations", 1)[1].split("\n## ", 1)[0]
+    lines = [line for line in text.strip().splitlines() if line.strip()]
+    assert 0 < len(lines) <= 25, f"README Limitations has {len(lines)} lines (at most 25)"

@@ -99,7 +99,7 @@ class IpoptSolver:
             solver = self._build(models, layout, n1, problem.t_plan, n_linear)
             self._solvers[key] = solver
         parts = [problem.error0]
-        lower = [np.full(sum(count for _, count, _ in layout), cons.epsilon)]
+        lower = [np.full(count, cons.margin(g)) for g, (_, count, _) in enumerate(layout)]
         if linear is not None and n_linear:
             parts.append(linear.A.T.ravel())  # column-major, as ca.vec
             lower.append(linear.b)

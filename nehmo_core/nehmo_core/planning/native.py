@@ -64,6 +64,7 @@ class _Group(ctypes.Structure):
         ("arg", _P),
         ("res", _P),
         ("tau", _D),
+        ("eps", _D),
     ]
 
 
@@ -71,7 +72,7 @@ class _Group(ctypes.Structure):
 class _Prepared:
     """The arguments of ``nehmo_sqp_iterate`` fixed by the constraints, and their memory."""
 
-    fixed: tuple[object, ...]  # τ, ε, groups, group structs, nlin, A, b
+    fixed: tuple[object, ...]  # groups, group structs, nlin, A, b
     structs: ctypes.Array[_Group]
     alive: list[np.ndarray]
     m: int
@@ -137,11 +138,11 @@ class NativeLoop:
         self.settings_at = ctypes.addressof(self.settings)
         self.iterate_fn = library.nehmo_sqp_iterate
         self.iterate_fn.restype = _I
-        self.iterate_fn.argtypes = [_I, _I, _P, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
+        self.iterate_fn.argtypes = [_I, _I, _P, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
         self.iterate_fn.argtypes += [_I, _D, _D, _I, _D, _P, _P, _P, _P]
         self.solve_fn = library.nehmo_sqp_solve
         self.solve_fn.restype = _I
-        self.solve_fn.argtypes = [_I, _I, _P, _D, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
+        self.solve_fn.argtypes = [_I, _I, _P, _D, _I, _P, _I, _P, _P, _P, _P, _P, _P]
         self.solve_fn.argtypes += [_P, _P, _D, _D, _D, _I, _D, _P, _P, _P, _P, _P, _P, _P]
         self.qp_fn = library.nehmo_qp_check
         self.qp_fn.restype = _I
@@ -222,7 +223,7 @@ class NativeLoop:
             k, n_state = states.shape
             slot.fn, slot.n, slot.k, slot.states = handle.fn, n_state, k, states.ctypes.data
             slot.iw, slot.w, slot.x, slot.g, slot.arg, slot.res = handle.addresses
-            slot.tau = cons.horizon(g)
+            slot.tau, slot.eps = cons.horizon(g), cons.margin(g)
             m += k
         else:
             nlin, A, b = 0, None, None
@@ -233,7 +234,7 @@ class NativeLoop:
                 nlin = len(b)
             m += nlin
             if n <= MAX_N and m <= MAX_M:
-                fixed: tuple[object, ...] = (cons.epsilon, len(groups))
+                fixed: tuple[object, ...] = (len(groups),)
                 fixed += (ctypes.addressof(structs), nlin)
                 fixed += (A.ctypes.data if A is not None else None,)
                 fixed += (b.ctypes.data if b is not None else None,)
@@ -328,13 +329,12 @@ class NativeLoop:
         io.J0[: m * n] = naive_values[1].reshape(-1)
         io.B0[: n * n] = B.reshape(-1)
         io.keep[:rows] = keep
-        eps, ngroups, groups, nlin, A, b = prepared.fixed
+        ngroups, groups, nlin, A, b = prepared.fixed
         code = self.solve_fn(
             n,
             rows,
             io.e0_at,
             problem.y_max,
-            eps,
             ngroups,
             groups,
             nlin,

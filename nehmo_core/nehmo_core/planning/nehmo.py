@@ -136,7 +136,9 @@ class NehmoPlanner(StallEscape):
                 self.pairs[peer.arm_id] = mapping
         self.peers_skipped = tuple(skipped)
         self.peers_unmodelled = tuple(unmodelled)
+        self._epsilon_floor = self.settings.epsilon
         self.epsilon_source = self._certify_epsilon()
+        self._margins: dict[tuple[int, float], float] = {}
         self.reset()
         s = self.settings
         self.self_clearance = (
@@ -159,7 +161,25 @@ class NehmoPlanner(StallEscape):
         deltas = ", ".join(f"{name} {d:.4g}" for name, d in sorted(certified.items()))
         note = f"ε = {self.settings.epsilon:.4g} m: max(floor {s.epsilon:g}"
         note += f", certified δ at t_safe {s.t_safe:g} s: {deltas})" if deltas else ")"
+        note += "; each model's rows keep max(floor, its own δ at their time-to-go)"
         return note + (f"; no certificate at t_safe for: {', '.join(missing)}" if missing else "")
+
+    def group_margin(self, model_index: int, bound: float) -> float:
+        """The margin [m] of the V rows of model ``model_index`` against peers planned at
+        ``bound`` of full speed, i.e. at time-to-go ``bound·t_safe``: with certified margins,
+        ``max(floor, δ)`` of that model's certificate at that horizon (see
+        :meth:`PairValueModel.certified_margin`), else ε."""
+        key = (model_index, bound)
+        if key not in self._margins:
+            s = self.settings
+            found = self.models[model_index].certified_margin(bound * s.t_safe)
+            if not s.certified_epsilon:
+                self._margins[key] = s.epsilon
+            elif found is None:  # uncertified: the cell-wide ε, as before any certificate
+                self._margins[key] = s.epsilon
+            else:
+                self._margins[key] = max(self._epsilon_floor, found[0])
+        return self._margins[key]
 
     def _self_rows(self, q: np.ndarray) -> SelfClearanceRows | None:
         return self.self_clearance.rows(q) if self.self_clearance is not None else None
@@ -289,7 +309,7 @@ class NehmoPlanner(StallEscape):
         cap: float = FULL_SPEED,
     ) -> OptProblem:
         s, n1 = self.settings, self.robot.dof
-        groups, horizons = [], []
+        groups, horizons, margins = [], [], []
         for m, b, members in now.groups:
             predicted = np.array([now.states[i] for i in members])
             n12 = n1 + self.models[m].n2  # a conditioned model's r (after q²) never moves
@@ -297,8 +317,9 @@ class NehmoPlanner(StallEscape):
             predicted[:, n1:n12] += s.t_plan * worst_case_disturbance(peer_grads, b * s.d_max)
             groups.append((m, predicted))
             horizons.append(b * s.t_safe)
+            margins.append(self.group_margin(m, b))
         constraints = Constraints(
-            self.models, groups, s.t_safe, s.epsilon, self_rows, tuple(horizons)
+            self.models, groups, s.t_safe, s.epsilon, self_rows, tuple(horizons), tuple(margins)
         )
         return OptProblem(error0, s.t_plan * s.u_max * cap, s.t_plan, constraints)
 

@@ -45,10 +45,16 @@ class Constraints:
     linear: SelfClearanceRows | None = None  # self-clearance rows A·y ≥ b, after the V rows
     # time-to-go [s] of each group's V rows; None: t_safe for every group
     horizons: tuple[float, ...] | None = None
+    # margin [m] each group's V rows must keep (V ≥ margin); None: epsilon for every group
+    margins: tuple[float, ...] | None = None
 
     def horizon(self, group: int) -> float:
         """The time-to-go [s] at which group ``group``'s V rows are evaluated."""
         return self.t_safe if self.horizons is None else self.horizons[group]
+
+    def margin(self, group: int) -> float:
+        """The level [m] group ``group``'s V rows must keep: ``V ≥ margin``."""
+        return self.epsilon if self.margins is None else self.margins[group]
 
     @cached_property
     def scratch(self) -> dict[object, object]:
@@ -77,26 +83,30 @@ class Constraints:
         return made
 
     def _subset(self, keep: np.ndarray) -> Constraints:
-        groups, horizons, start = [], [], 0
+        groups, horizons, margins, start = [], [], [], 0
         for g, (index, states) in enumerate(self.groups):
             mine = keep[start : start + len(states)]
             start += len(states)
             if mine.any():
                 groups.append((index, states[mine]))
                 horizons.append(self.horizon(g))
+                margins.append(self.margin(g))
         return replace(
-            self, groups=groups, horizons=None if self.horizons is None else tuple(horizons)
+            self,
+            groups=groups,
+            horizons=None if self.horizons is None else tuple(horizons),
+            margins=None if self.margins is None else tuple(margins),
         )
 
     def evaluate(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(c (m,), J (m, n1))``: ``c = V − ε`` and its gradient with respect to ``y``."""
+        """``(c (m,), J (m, n1))``: ``c = V − margin`` and its gradient with respect to ``y``."""
         n = len(y)
         c = np.empty(self.count)
         J = np.empty((len(c), n))
         k = 0
         for group, (index, states) in enumerate(self.groups):
             v, g = self.models[index].evaluate(self.horizon(group), states, own_step=y)
-            np.subtract(v, self.epsilon, out=c[k : k + len(v)])
+            np.subtract(v, self.margin(group), out=c[k : k + len(v)])
             J[k : k + len(v)] = g[:, :n]
             k += len(v)
         if k < len(c):

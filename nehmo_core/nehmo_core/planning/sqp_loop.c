@@ -49,6 +49,7 @@ typedef struct {
   const double** arg; /* sz_arg pointers (the function may use those past its inputs) */
   double** res;       /* sz_res pointers */
   double tau;         /* time-to-go [s] at which this group's V rows are evaluated */
+  double eps;         /* the margin [m] this group's V rows must keep: V >= eps */
 } nehmo_group;
 
 enum { NEHMO_OPTIMAL = 0, NEHMO_INFEASIBLE = 1, NEHMO_ITERATION_LIMIT = 2, NEHMO_TIMEOUT = 3,
@@ -60,7 +61,7 @@ enum { NEHMO_OPTIMAL = 0, NEHMO_INFEASIBLE = 1, NEHMO_ITERATION_LIMIT = 2, NEHMO
 typedef struct {
   int n, m, ngroups, nlin;
   const double* error0;
-  double ymax, eps;
+  double ymax;
   nehmo_group* groups;
   const double* A; /* (nlin, n) */
   const double* b; /* (nlin,) */
@@ -73,7 +74,7 @@ static double nehmo_now(void) {
   return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
 }
 
-/* c = V - eps and J = dV/dy at step y for the active V rows (packed, in order); the nlin
+/* c = V - eps (the group's) and J = dV/dy at step y for the active V rows (packed, in order); the nlin
  * linear rows A y - b after them. */
 static int nehmo_evaluate(const nehmo_problem* p, const double* y, double* c, double* J) {
   int row = 0, n = p->n, index = 0;
@@ -89,7 +90,7 @@ static int nehmo_evaluate(const nehmo_problem* p, const double* y, double* c, do
       grp->res[0] = &v;
       grp->res[1] = grp->g;
       if (grp->fn(grp->arg, grp->res, grp->iw, grp->w, 0)) return 1;
-      c[row] = v - p->eps;
+      c[row] = v - grp->eps;
       memcpy(J + (size_t)row * n, grp->g, sizeof(double) * n);
       ++row;
     }
@@ -278,14 +279,13 @@ static int nehmo_iterate(const nehmo_problem* problem, double* y, double* B, dou
 }
 
 /* Returns a status (enum above); y, B, c (m,), J (m, n) hold the final iterate. */
-int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, double eps,
-                      int ngroups, nehmo_group* groups, int nlin, const double* A,
-                      const double* b, double* y, double* B, double* c, double* J,
-                      int evaluated, double tol,
+int nehmo_sqp_iterate(int n, int m, const double* error0, double ymax, int ngroups,
+                      nehmo_group* groups, int nlin, const double* A, const double* b,
+                      double* y, double* B, double* c, double* J, int evaluated, double tol,
                       double feasibility_tol, int max_iter, double deadline,
                       nehmo_daqp_quadprog quadprog, void* settings, int* iterations,
                       int* qp_flag) {
-  nehmo_problem prob = {n, m, ngroups, nlin, error0, ymax, eps, groups, A, b, NULL};
+  nehmo_problem prob = {n, m, ngroups, nlin, error0, ymax, groups, A, b, NULL};
   return nehmo_iterate(&prob, y, B, c, J, evaluated, tol, feasibility_tol, max_iter, deadline,
                        quadprog, settings, iterations, qp_flag);
 }
@@ -374,16 +374,15 @@ static int nehmo_same(const double* a, const double* b, int n) {
  * naive step (its rows' values c_naive, J_naive at hand) and from y = 0, each once unless tried.
  * keep: the V rows carried at first. Outputs: y, c (rows + nlin; NaN where not evaluated), B
  * (the Hessian estimate when optimal), iterations and the last QP flag. */
-int nehmo_sqp_solve(int n, int rows, const double* error0, double ymax, double eps,
-                    int ngroups, nehmo_group* groups, int nlin, const double* A,
-                    const double* b, const double* y_start, const double* naive,
+int nehmo_sqp_solve(int n, int rows, const double* error0, double ymax, int ngroups,
+                    nehmo_group* groups, int nlin, const double* A, const double* b,
+                    const double* y_start, const double* naive,
                     const double* c_naive, const double* J_naive, const double* B0,
                     const unsigned char* keep, double screen, double tol,
                     double feasibility_tol, int max_iter, double deadline,
                     nehmo_daqp_quadprog quadprog, void* settings, double* y, double* c,
                     double* B, int* iterations, int* qp_flag) {
-  nehmo_solve_args a = {{n, rows + nlin, ngroups, nlin, error0, ymax, eps, groups, A, b,
-                         NULL},
+  nehmo_solve_args a = {{n, rows + nlin, ngroups, nlin, error0, ymax, groups, A, b, NULL},
                         rows, tol, feasibility_tol, screen, deadline, quadprog, settings};
   const double zero[NEHMO_MAX_N] = {0.0};
   const double* tried[3];
