@@ -46,6 +46,7 @@ from nehmo_core.planning.interface import (
     goal_error,
     one_joint_vector,
 )
+from nehmo_core.planning.margins import CertifiedMargins
 from nehmo_core.planning.native import loop
 from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
 from nehmo_core.planning.pair_frame import PairMapping, arm_reach, match_pair
@@ -136,9 +137,10 @@ class NehmoPlanner(StallEscape):
                 self.pairs[peer.arm_id] = mapping
         self.peers_skipped = tuple(skipped)
         self.peers_unmodelled = tuple(unmodelled)
-        self._epsilon_floor = self.settings.epsilon
-        self.epsilon_source = self._certify_epsilon()
-        self._margins: dict[tuple[int, float], float] = {}
+        used = [m.model_index for m in self.pairs.values()]
+        self.margins = CertifiedMargins(self.models, self.settings, used)
+        self.epsilon_source = self.margins.source
+        self.settings = self.settings.replace(epsilon=self.margins.epsilon)
         self.reset()
         s = self.settings
         self.self_clearance = (
@@ -147,39 +149,10 @@ class NehmoPlanner(StallEscape):
             else None
         )
 
-    def _certify_epsilon(self) -> str:
-        """Raise ε to the certified levels of the models in use; say where ε came from."""
-        s = self.settings
-        if not s.certified_epsilon:
-            return f"ε = {s.epsilon:g} m, fixed"
-        used = sorted({m.model_index for m in self.pairs.values()})
-        levels = {self.models[i].name: self.models[i].certified_level(s.t_safe) for i in used}
-        certified = {name: d for name, d in levels.items() if d is not None}
-        missing = sorted(name for name, d in levels.items() if d is None)
-        if certified and max(certified.values()) > s.epsilon:
-            self.settings = s.replace(epsilon=max(certified.values()))
-        deltas = ", ".join(f"{name} {d:.4g}" for name, d in sorted(certified.items()))
-        note = f"ε = {self.settings.epsilon:.4g} m: max(floor {s.epsilon:g}"
-        note += f", certified δ at t_safe {s.t_safe:g} s: {deltas})" if deltas else ")"
-        note += "; each model's rows keep max(floor, its own δ at their time-to-go)"
-        return note + (f"; no certificate at t_safe for: {', '.join(missing)}" if missing else "")
-
     def group_margin(self, model_index: int, bound: float) -> float:
-        """The margin [m] of the V rows of model ``model_index`` against peers planned at
-        ``bound`` of full speed, i.e. at time-to-go ``bound·t_safe``: with certified margins,
-        ``max(floor, δ)`` of that model's certificate at that horizon (see
-        :meth:`PairValueModel.certified_margin`), else ε."""
-        key = (model_index, bound)
-        if key not in self._margins:
-            s = self.settings
-            found = self.models[model_index].certified_margin(bound * s.t_safe)
-            if not s.certified_epsilon:
-                self._margins[key] = s.epsilon
-            elif found is None:  # uncertified: the cell-wide ε, as before any certificate
-                self._margins[key] = s.epsilon
-            else:
-                self._margins[key] = max(self._epsilon_floor, found[0])
-        return self._margins[key]
+        """The margin [m] of model ``model_index``'s rows against peers planned at ``bound`` of
+        full speed (:meth:`~nehmo_core.planning.margins.CertifiedMargins.group`)."""
+        return self.margins.group(model_index, bound)
 
     def _self_rows(self, q: np.ndarray) -> SelfClearanceRows | None:
         return self.self_clearance.rows(q) if self.self_clearance is not None else None

@@ -1,0 +1,62 @@
+"""Certified margins: the level ``V ≥ margin`` each pair model's rows of Opt keep.
+
+With certified margins (``PlannerSettings.certified_epsilon``), a model's rows keep
+``max(floor, δ)``, ``δ`` the level that model's card certifies (``nehmo verify``) at the rows'
+time-to-go: ``t_safe`` against a peer at full speed, ``bound·t_safe`` against one that announced a
+speed bound (or the next longer certified horizon; see
+:meth:`~nehmo_core.planning.value_model.PairValueModel.certified_margin`). The planner's reported
+ε, which its threat check uses, is the largest of the floor and every ``δ`` at ``t_safe``.
+Without certified margins every row keeps the settings' ε (the paper's fixed margin).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.value_model import PairValueModel
+
+
+class CertifiedMargins:
+    """Margins of one planner's models under ``settings`` (ε as given is the floor); ``used``:
+    the indices of the models its pairs map onto."""
+
+    def __init__(
+        self, models: Sequence[PairValueModel], settings: PlannerSettings, used: Sequence[int]
+    ) -> None:
+        self.models = list(models)
+        self.settings = settings
+        self.floor = settings.epsilon
+        self.epsilon, self.source = self._reported(sorted(set(used)))
+        self._cache: dict[tuple[int, float], float] = {}
+
+    def _reported(self, used: list[int]) -> tuple[float, str]:
+        """The reported ε and a line saying where it came from."""
+        s = self.settings
+        if not s.certified_epsilon:
+            return s.epsilon, f"ε = {s.epsilon:g} m, fixed"
+        levels = {self.models[i].name: self.models[i].certified_level(s.t_safe) for i in used}
+        certified = {name: d for name, d in levels.items() if d is not None}
+        missing = sorted(name for name, d in levels.items() if d is None)
+        epsilon = max([s.epsilon, *certified.values()])
+        deltas = ", ".join(f"{name} {d:.4g}" for name, d in sorted(certified.items()))
+        note = f"ε = {epsilon:.4g} m: max(floor {s.epsilon:g}"
+        note += f", certified δ at t_safe {s.t_safe:g} s: {deltas})" if deltas else ")"
+        note += "; each model's rows keep max(floor, its own δ at their time-to-go)"
+        if missing:
+            note += f"; no certificate at t_safe for: {', '.join(missing)}"
+        return epsilon, note
+
+    def group(self, model_index: int, bound: float) -> float:
+        """The margin [m] of model ``model_index``'s rows against peers planned at ``bound`` of
+        full speed (time-to-go ``bound·t_safe``); the reported ε for a model without a
+        certificate that long, or without certified margins."""
+        key = (model_index, bound)
+        if key not in self._cache:
+            s = self.settings
+            found = self.models[model_index].certified_margin(bound * s.t_safe)
+            if not s.certified_epsilon or found is None:
+                self._cache[key] = self.epsilon
+            else:
+                self._cache[key] = max(self.floor, found[0])
+        return self._cache[key]
