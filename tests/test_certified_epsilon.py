@@ -61,14 +61,15 @@ def test_paper_rows_keep_the_fixed_epsilon(model: PairValueModel) -> None:
     assert _planner(certified, certified_epsilon=False).settings.epsilon == pytest.approx(0.05)
 
 
-def test_each_model_keeps_its_own_certified_level(model: PairValueModel) -> None:
-    loose = dataclasses.replace(model, certificates=(_cert(0.3, 0.09),))
+def test_full_speed_rows_keep_one_epsilon_slow_rows_their_own_level(model: PairValueModel) -> None:
+    loose = dataclasses.replace(model, certificates=(_cert(0.3, 0.09), _cert(0.06, 0.07)))
     tight = dataclasses.replace(model, name="tight", certificates=(_cert(0.3, 0.0),))
     planner = make_planner("nehmo", load_cell("dual_ur5"), "ur5_0", [loose, tight])
     assert isinstance(planner, NehmoPlanner)
     assert planner.settings.epsilon == pytest.approx(0.09)  # the cell-wide ε: the largest δ
-    assert planner.group_margin(0, 1.0) == pytest.approx(0.09)
-    assert planner.group_margin(1, 1.0) == pytest.approx(0.05)  # the floor, not the other's δ
+    assert planner.group_margin(0, 1.0) == planner.group_margin(1, 1.0) == pytest.approx(0.09)
+    assert planner.group_margin(0, 0.2) == pytest.approx(0.07)  # its own level at 0.06 s
+    assert planner.group_margin(1, 0.2) == pytest.approx(0.05)  # the 0.3 s level 0, the floor
 
 
 def test_rows_against_a_slow_peer_keep_the_level_certified_at_their_horizon(
@@ -79,6 +80,7 @@ def test_rows_against_a_slow_peer_keep_the_level_certified_at_their_horizon(
     assert planner.group_margin(0, 0.2) == pytest.approx(0.06)  # τ = 0.06: the larger δ there
     assert planner.group_margin(0, 0.3) == pytest.approx(0.07)  # τ = 0.09: the 0.1 s level
     assert planner.group_margin(0, 0.5) == pytest.approx(0.09)  # τ = 0.15: the 0.3 s level
+    assert planner.group_margin(0, 1.0) == pytest.approx(0.09)  # full speed: ε
     low = dataclasses.replace(model, certificates=(_cert(0.3, 0.09), _cert(0.06, 0.01)))
     assert _planner(low).group_margin(0, 0.2) == pytest.approx(0.05)  # never below the floor
     paper = _planner(dataclasses.replace(model, certificates=certs), "nehmo_paper")

@@ -1,11 +1,14 @@
 """Certified margins: the level ``V ≥ margin`` each pair model's rows of Opt keep.
 
-With certified margins (``PlannerSettings.certified_epsilon``), a model's rows keep
-``max(floor, δ)``, ``δ`` the level that model's card certifies (``nehmo verify``) at the rows'
-time-to-go: ``t_safe`` against a peer at full speed, ``bound·t_safe`` against one that announced a
-speed bound (or the next longer certified horizon; see
-:meth:`~nehmo_core.planning.value_model.PairValueModel.certified_margin`). The planner's reported
-ε, which its threat check uses, is the largest of the floor and every ``δ`` at ``t_safe``.
+With certified margins (``PlannerSettings.certified_epsilon``), rows against a peer at full speed
+keep ε: the largest of the floor (the settings' ε) and every ``δ`` the cards of the planner's
+models certify (``nehmo verify``) at ``t_safe``. Rows against a peer that announced a speed bound,
+planned at time-to-go ``bound·t_safe``, keep ``max(floor, δ)`` of their own model's certificate
+at that horizon (or the next longer certified one; see
+:meth:`~nehmo_core.planning.value_model.PairValueModel.certified_margin`), never more than ε.
+Full-speed rows keep one ε for every model: with each model's own ``δ`` instead (0.05 m for the
+five-UR5 cell's 0.849 m and 1.2 m pairs against 0.083 m for its 0.6 m pairs), the centre arm was
+squeezed into contact in a closed loop where one ε kept it clear (seed 0, scenario 38).
 Without certified margins every row keeps the settings' ε (the paper's fixed margin).
 """
 
@@ -49,14 +52,14 @@ class CertifiedMargins:
 
     def group(self, model_index: int, bound: float) -> float:
         """The margin [m] of model ``model_index``'s rows against peers planned at ``bound`` of
-        full speed (time-to-go ``bound·t_safe``); the reported ε for a model without a
+        full speed (time-to-go ``bound·t_safe``): ε at full speed, for a model without a
         certificate that long, or without certified margins."""
         key = (model_index, bound)
         if key not in self._cache:
             s = self.settings
             found = self.models[model_index].certified_margin(bound * s.t_safe)
-            if not s.certified_epsilon or found is None:
+            if not s.certified_epsilon or found is None or bound >= 1.0:
                 self._cache[key] = self.epsilon
             else:
-                self._cache[key] = max(self.floor, found[0])
+                self._cache[key] = min(self.epsilon, max(self.floor, found[0]))
         return self._cache[key]
