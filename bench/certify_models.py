@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 
 from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.verify.report import certificates_table
+from nehmo_core.verify.report import certificate_stem, certificates_table
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "results" / "certificates"
@@ -63,8 +63,8 @@ def main() -> int:
                     continue
                 logs = [a for s in setups for a in ("--logs", str(args.episodes_dir / s))]
                 for dist in ("visited", "uniform"):
-                    slug = f"{pair}_{variant.replace('+', '_')}_{dist}_tau{tau:g}"
-                    if args.missing and (OUT / f"{slug}.json").exists():
+                    stem = certificate_stem(pair, variant, dist, tau)
+                    if args.missing and (OUT / f"{stem}.json").exists():
                         continue
                     cmd = ["nehmo", "verify", "--model", pair, "--variant", variant]
                     cmd += [

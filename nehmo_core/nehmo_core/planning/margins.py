@@ -45,7 +45,7 @@ class CertifiedMargins:
         deltas = ", ".join(f"{name} {d:.4g}" for name, d in sorted(certified.items()))
         note = f"ε = {epsilon:.4g} m: max(floor {s.epsilon:g}"
         note += f", certified δ at t_safe {s.t_safe:g} s: {deltas})" if deltas else ")"
-        note += "; each model's rows keep max(floor, its own δ at their time-to-go)"
+        note += "; rows against a settled peer keep max(floor, their model's δ at that horizon)"
         if missing:
             note += f"; no certificate at t_safe for: {', '.join(missing)}"
         return epsilon, note
@@ -57,9 +57,8 @@ class CertifiedMargins:
         key = (model_index, bound)
         if key not in self._cache:
             s = self.settings
-            found = self.models[model_index].certified_margin(bound * s.t_safe)
-            if not s.certified_epsilon or found is None or bound >= 1.0:
-                self._cache[key] = self.epsilon
-            else:
-                self._cache[key] = min(self.epsilon, max(self.floor, found[0]))
+            slow = s.certified_epsilon and bound < 1.0
+            found = self.models[model_index].certified_margin(bound * s.t_safe) if slow else None
+            margin = self.epsilon if found is None else min(self.epsilon, max(self.floor, found))
+            self._cache[key] = margin
         return self._cache[key]

@@ -41,10 +41,10 @@ class PlannerSettings:
     """
 
     epsilon: float = 0.05  # safety margin on V
-    # certified margins (``nehmo verify`` cards): each model's V rows keep max(epsilon, δ), δ the
-    # level that model is certified at for the rows' time-to-go (t_safe, or hold_bound·t_safe
-    # against a peer that announced a bound); epsilon itself is raised to the largest δ at t_safe
-    # (the threat check and statuses use it). False keeps epsilon as given (the paper's margin)
+    # certified margins (``nehmo verify`` cards, ``planning/margins.py``): epsilon is raised to the
+    # largest δ certified at t_safe by the pair models in use; rows against a peer that announced a
+    # bound keep max(epsilon as given, their model's δ at hold_bound·t_safe), at most the raised
+    # epsilon. False keeps epsilon as given for every row (the paper's fixed margin)
     certified_epsilon: bool = True
     t_plan: float = 0.1  # planning horizon: the command is held this long
     t_safe: float = 0.3  # time-to-go at which V must stay ≥ epsilon after the step

@@ -116,19 +116,15 @@ class PairValueModel:
         found = [c["delta"] for c in self.certificates if abs(c["tau"] - tau) < 1e-6]
         return max(found) if found else None
 
-    def certified_margin(self, tau: float) -> tuple[float, float] | None:
-        """``(δ [m], τ_c [s])``: the level certified at the shortest certified time-to-go
-        ``τ_c ≥ tau`` (the horizon itself when certified there), or None when none is that long.
+    def certified_margin(self, tau: float) -> float | None:
+        """The level ``δ`` [m] certified at the shortest certified time-to-go ``τ_c ≥ tau`` [s]
+        (the horizon itself when certified there), or None when none is that long.
 
         A level certified over a longer horizon is taken for a shorter one, on the premise that
         the learned value's error does not shrink with the horizon.
         """
-        longer = sorted({float(c["tau"]) for c in self.certificates if c["tau"] >= tau - 1e-6})
-        if not longer:
-            return None
-        level = self.certified_level(longer[0])
-        assert level is not None
-        return level, longer[0]
+        longer = [float(c["tau"]) for c in self.certificates if c["tau"] >= tau - 1e-6]
+        return self.certified_level(min(longer)) if longer else None
 
     def evaluate(
         self, tau: float, x: np.ndarray, own_step: np.ndarray | None = None

@@ -21,14 +21,14 @@ from nehmo_core.hjr import load_value_function
 from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
 from nehmo_core.verify.adversaries import ADVERSARIES, DEFAULT_ADVERSARIES
 from nehmo_core.verify.cards import record_certificate, shipped_card_path
-from nehmo_core.verify.certify import Certificate, VerifySettings, certify
+from nehmo_core.verify.certify import VerifySettings, certify
 from nehmo_core.verify.distributions import (
     StateDistribution,
     UniformBox,
     episode_logs,
     visited_pair_states,
 )
-from nehmo_core.verify.report import certificate_markdown
+from nehmo_core.verify.report import certificate_markdown, certificate_stem
 from nehmo_core.verify.truth import exact_margin
 
 __all__ = ["add_arguments", "run"]
@@ -93,11 +93,6 @@ def _distribution(args: argparse.Namespace, system: HJISystem) -> StateDistribut
     return visited_pair_states(system, episode_logs(args.logs))
 
 
-def _stem(cert: Certificate, variant: str) -> str:
-    slug = variant.replace("+", "_")
-    return f"{cert.system}_{slug}_{cert.distribution['name']}_tau{cert.tau:g}"
-
-
 def run(args: argparse.Namespace) -> int:
     with as_options(_OPTIONS):
         settings = VerifySettings(
@@ -127,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
         sys.argv[2:] if sys.argv[1:2] == ["verify"] else sys.argv[1:]
     )
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = _stem(cert, variant)
+    stem = certificate_stem(cert.system, variant, cert.distribution["name"], cert.tau)
     (args.out / f"{stem}.json").write_text(json.dumps(cert.to_dict(), indent=2) + "\n")
     (args.out / f"{stem}.md").write_text(certificate_markdown(cert))
     verdict = "certified" if cert.certified else "NOT certified"

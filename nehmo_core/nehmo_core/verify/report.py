@@ -1,4 +1,4 @@
-"""Markdown for certificates: one certificate as a page, several as one table."""
+"""Markdown for certificates (one as a page, several as one table) and their file names."""
 
 from __future__ import annotations
 
@@ -6,6 +6,11 @@ from collections.abc import Sequence
 from typing import Any
 
 from nehmo_core.verify.certify import Certificate
+
+
+def certificate_stem(system: str, variant: str, distribution: str, tau: float) -> str:
+    """The file name (without suffix) of a certificate's JSON and Markdown."""
+    return f"{system}_{variant.replace('+', '_')}_{distribution}_tau{tau:g}"
 
 
 def certificate_markdown(cert: Certificate) -> str:

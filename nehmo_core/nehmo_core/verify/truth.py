@@ -44,7 +44,7 @@ class PairDistance:
     def __init__(self, system: ArmPairSystem) -> None:
         cell, self.arm_a, self.arm_b = pair_arms(system.name)
         self.n1, self.n2 = system.n1, system.n2
-        self.conditioned = system.name in CONDITIONED_PAIRS
+        self.conditioned = bool(system.conditions)
         self.world = CellWorld(cell)
         self._r: float | None = None
 
