@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from nehmo_core.errors import InvalidValueError
 from nehmo_core.hjr import NetworkSettings
 from nehmo_core.planning.factory import make_planner
 from nehmo_core.planning.nehmo import NehmoPlanner
@@ -100,3 +101,21 @@ def test_a_slow_peers_rows_carry_their_margin_into_opt(model: PairValueModel) ->
         v, _ = cons.models[0].evaluate(cons.horizon(0), cons.groups[0][1])
         assert cons.horizon(0) == pytest.approx(bound * 0.3)
         assert c[0] == pytest.approx(v[0] - margin, abs=1e-12)  # the row is V minus its margin
+
+
+def test_a_settled_floor_lowers_only_rows_against_a_settled_peer(model: PairValueModel) -> None:
+    certs = (_cert(0.3, 0.09), _cert(0.06, 0.0), _cert(0.1, 0.03))
+    planner = _planner(dataclasses.replace(model, certificates=certs), settled_epsilon=0.02)
+    assert planner.settings.epsilon == pytest.approx(0.09)  # full-speed rows: unchanged
+    assert planner.group_margin(0, 1.0) == pytest.approx(0.09)
+    assert planner.group_margin(0, 0.2) == pytest.approx(0.02)  # δ = 0 at 0.06 s: the floor
+    assert planner.group_margin(0, 0.3) == pytest.approx(0.03)  # δ at 0.1 s is above it
+    assert "max(0.02" in planner.epsilon_source
+    paper = _planner(dataclasses.replace(model, certificates=certs), certified_epsilon=False)
+    assert paper.group_margin(0, 0.2) == pytest.approx(0.05)
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.01, 0.06])
+def test_a_settled_floor_outside_zero_to_epsilon_is_rejected(bad: float) -> None:
+    with pytest.raises(InvalidValueError, match=r"settled_epsilon.*\(0, epsilon = 0.05\]"):
+        PlannerSettings(settled_epsilon=bad)

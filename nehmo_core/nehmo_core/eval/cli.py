@@ -112,10 +112,13 @@ def parse_settings(items: list[str]) -> dict[str, object]:
             raise InvalidValueError(
                 "--planner-setting", f"must be KEY=VALUE with KEY one of {sorted(fields)}", item
             )
-        kind = type(getattr(defaults, key))
+        default = getattr(defaults, key)
+        kind = float if default is None else type(default)  # optional settings are numbers
         text = text.strip()
         try:
-            if kind is bool:
+            if default is None and text.lower() == "none":
+                out[key] = None
+            elif kind is bool:
                 if text.lower() not in ("true", "false", "1", "0"):
                     raise ValueError(text)
                 out[key] = text.lower() in ("true", "1")

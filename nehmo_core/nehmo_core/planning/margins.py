@@ -3,8 +3,9 @@
 With certified margins (``PlannerSettings.certified_epsilon``), rows against a peer at full speed
 keep ε: the largest of the floor (the settings' ε) and every ``δ`` the cards of the planner's
 models certify (``nehmo verify``) at ``t_safe``. Rows against a peer that announced a speed bound,
-planned at time-to-go ``bound·t_safe``, keep ``max(floor, δ)`` of their own model's certificate
-at that horizon (or the next longer certified one; see
+planned at time-to-go ``bound·t_safe``, keep ``max(settled floor, δ)`` of their own model's
+certificate at that horizon (the settled floor is ``settled_epsilon``, by default ε as given; with
+no certificate at exactly that horizon, the next longer certified one; see
 :meth:`~nehmo_core.planning.value_model.PairValueModel.certified_margin`), never more than ε.
 Full-speed rows keep one ε for every model: with each model's own ``δ`` instead (0.05 m for the
 five-UR5 cell's 0.849 m and 1.2 m pairs against 0.083 m for its 0.6 m pairs), the centre arm was
@@ -30,6 +31,9 @@ class CertifiedMargins:
         self.models = list(models)
         self.settings = settings
         self.floor = settings.epsilon
+        self.settled_floor = (
+            settings.epsilon if settings.settled_epsilon is None else settings.settled_epsilon
+        )
         self.epsilon, self.source = self._reported(sorted(set(used)))
         self._cache: dict[tuple[int, float], float] = {}
 
@@ -45,7 +49,10 @@ class CertifiedMargins:
         deltas = ", ".join(f"{name} {d:.4g}" for name, d in sorted(certified.items()))
         note = f"ε = {epsilon:.4g} m: max(floor {s.epsilon:g}"
         note += f", certified δ at t_safe {s.t_safe:g} s: {deltas})" if deltas else ")"
-        note += "; rows against a settled peer keep max(floor, their model's δ at that horizon)"
+        note += (
+            f"; rows against a settled peer keep max({self.settled_floor:g}, their model's δ at"
+            " that horizon)"
+        )
         if missing:
             note += f"; no certificate at t_safe for: {', '.join(missing)}"
         return epsilon, note
@@ -59,6 +66,8 @@ class CertifiedMargins:
             s = self.settings
             slow = s.certified_epsilon and bound < 1.0
             found = self.models[model_index].certified_margin(bound * s.t_safe) if slow else None
-            margin = self.epsilon if found is None else min(self.epsilon, max(self.floor, found))
+            margin = (
+                self.epsilon if found is None else min(self.epsilon, max(self.settled_floor, found))
+            )
             self._cache[key] = margin
         return self._cache[key]
