@@ -415,10 +415,6 @@ def test_planner_setting_overrides_are_typed_and_checked() -> None:
         parse_settings(["escape=maybe"])
     with pytest.raises(InvalidValueError, match="stall_ticks must be an integer"):
         parse_settings(["stall_ticks=1.5"])
-    assert parse_settings(["settled_epsilon=0.02"]) == {"settled_epsilon": 0.02}
-    assert parse_settings(["settled_epsilon=none"]) == {"settled_epsilon": None}
-    with pytest.raises(InvalidValueError, match="settled_epsilon must be a number"):
-        parse_settings(["settled_epsilon=low"])
 
 
 def test_one_line_summaries_give_the_papers_cr_and_self_collisions_apart() -> None:

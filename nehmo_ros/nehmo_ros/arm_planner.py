@@ -99,6 +99,12 @@ PARAMS: dict[str, Param] = {
     "certified_epsilon": Param(
         _PLANNER.certified_epsilon, "raise epsilon to the models' certified level at t_safe"
     ),
+    "settled_epsilon": Param(
+        _PLANNER.settled_epsilon,
+        "[m] floor of the margin against a peer that announced a speed bound",
+        1e-6,
+        1.0,
+    ),
     "u_max": Param(_PLANNER.u_max, "[rad/s] own joint speed bound"),
     "d_max": Param(_PLANNER.d_max, "[rad/s] peers' joint speed bound (worst case)"),
     "solver": Param(_PLANNER.solver, "sqp | ipopt"),
@@ -179,6 +185,7 @@ class ArmPlannerNode(Node):
         settings = PlannerSettings(
             epsilon=float(p["epsilon"]),
             certified_epsilon=bool(p["certified_epsilon"]),
+            settled_epsilon=float(p["settled_epsilon"]),
             t_plan=float(p["t_plan"]),
             t_safe=float(p["t_safe"]),
             u_max=float(p["u_max"]),

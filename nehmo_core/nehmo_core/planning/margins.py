@@ -4,8 +4,8 @@ With certified margins (``PlannerSettings.certified_epsilon``), rows against a p
 keep ε: the largest of the floor (the settings' ε) and every ``δ`` the cards of the planner's
 models certify (``nehmo verify``) at ``t_safe``. Rows against a peer that announced a speed bound,
 planned at time-to-go ``bound·t_safe``, keep ``max(settled floor, δ)`` of their own model's
-certificate at that horizon (the settled floor is ``settled_epsilon``, by default ε as given; with
-no certificate at exactly that horizon, the next longer certified one; see
+certificate at that horizon (the settled floor is ``settled_epsilon``; with no certificate at
+exactly that horizon, the next longer certified one; see
 :meth:`~nehmo_core.planning.value_model.PairValueModel.certified_margin`), never more than ε.
 Full-speed rows keep one ε for every model: with each model's own ``δ`` instead (0.05 m for the
 five-UR5 cell's 0.849 m and 1.2 m pairs against 0.083 m for its 0.6 m pairs), the centre arm was
@@ -31,9 +31,7 @@ class CertifiedMargins:
         self.models = list(models)
         self.settings = settings
         self.floor = settings.epsilon
-        self.settled_floor = (
-            settings.epsilon if settings.settled_epsilon is None else settings.settled_epsilon
-        )
+        self.settled_floor = settings.settled_epsilon
         self.epsilon, self.source = self._reported(sorted(set(used)))
         self._cache: dict[tuple[int, float], float] = {}
 

@@ -46,9 +46,9 @@ class PlannerSettings:
     # bound keep max(epsilon as given, their model's δ at hold_bound·t_safe), at most the raised
     # epsilon. False keeps epsilon as given for every row (the paper's fixed margin)
     certified_epsilon: bool = True
-    # with certified margins, the floor of rows against a peer that announced a speed bound (None:
-    # epsilon as given); such rows keep max(settled_epsilon, their model's δ at hold_bound·t_safe)
-    settled_epsilon: float | None = None
+    # with certified margins, the floor [m] of rows against a peer that announced a speed bound:
+    # they keep min(raised epsilon, max(settled_epsilon, their model's δ at hold_bound·t_safe))
+    settled_epsilon: float = 0.05
     t_plan: float = 0.1  # planning horizon: the command is held this long
     t_safe: float = 0.3  # time-to-go at which V must stay ≥ epsilon after the step
     u_max: float = 0.5  # ū: own joint speed bound
@@ -117,6 +117,7 @@ class PlannerSettings:
     def __post_init__(self) -> None:
         for name in (
             "epsilon",
+            "settled_epsilon",
             "t_plan",
             "t_safe",
             "u_max",
@@ -127,12 +128,6 @@ class PlannerSettings:
         ):
             if not getattr(self, name) > 0:
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))
-        if self.settled_epsilon is not None and not 0.0 < self.settled_epsilon <= self.epsilon:
-            raise InvalidValueError(
-                "settled_epsilon",
-                f"must lie in (0, epsilon = {self.epsilon}] [m]",
-                self.settled_epsilon,
-            )
         if not self.t_plan < self.t_safe:
             raise InvalidValueError("t_plan", f"must be < t_safe ({self.t_safe})", self.t_plan)
         if not 0.0 <= self.fail_safe_deadband < 1.0:
