@@ -103,7 +103,7 @@ class Certificate:
         return asdict(self)
 
 
-def _rollouts(
+def worst_margins(
     value: ValueModel,
     margin: ExactMargin,
     x: np.ndarray,
@@ -111,6 +111,8 @@ def _rollouts(
     rng: np.random.Generator,
     label: str,
 ) -> tuple[np.ndarray, list[str]]:
+    """The smallest exact margin [m] of each state's rollouts over ``settings.tau`` against
+    every adversary, and the adversary that reached it (a contact when ``≤ 0``)."""
     margins: list[np.ndarray] = []
     names: list[str] = []
     starts = range(0, x.shape[0], settings.chunk)
@@ -169,7 +171,7 @@ def certify(
     rng = np.random.default_rng(settings.seed)
     s = settings
     x, v, _ = draw_level_set(value, distribution, s.tau, 0.0, s.search_samples, rng)
-    m, _ = _rollouts(value, margin, x, s, rng, "search")
+    m, _ = worst_margins(value, margin, x, s, rng, "search")
     violated = m <= 0.0
     delta = search_delta(v, violated, s)
     search = {
@@ -183,7 +185,7 @@ def certify(
     for a in range(s.attempts):
         level = delta + a * s.delta_step
         xc, _, share = draw_level_set(value, distribution, s.tau, level, s.samples, rng)
-        mc, who = _rollouts(value, margin, xc, s, rng, f"certify δ={level:.3f}")
+        mc, who = worst_margins(value, margin, xc, s, rng, f"certify δ={level:.3f}")
         bad = mc <= 0.0
         k = int(bad.sum())
         eps = violation_bound(s.samples, k, beta_each)
