@@ -8,8 +8,9 @@ certificate at that horizon (the settled floor is ``settled_epsilon``; with no c
 exactly that horizon, the next longer certified one; see
 :meth:`~nehmo_core.planning.value_model.PairValueModel.certified_margin`), never more than ε.
 Full-speed rows keep one ε for every model: with each model's own ``δ`` instead (0.05 m for the
-five-UR5 cell's 0.849 m and 1.2 m pairs against 0.083 m for its 0.6 m pairs), the centre arm was
-squeezed into contact in a closed loop where one ε kept it clear (seed 0, scenario 38).
+five-UR5 cell's 0.849 m and 1.2 m pairs against 0.083 m for its 0.6 m pairs, then on 10M-sample
+models), the centre arm was squeezed into contact in a closed loop where one ε kept it clear
+(seed 0, scenario 38).
 Without certified margins every row keeps the settings' ε (the paper's fixed margin).
 """
 
