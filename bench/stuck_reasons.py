@@ -1,0 +1,102 @@
+"""Why NeHMO episodes end stuck: each stuck episode of the fresh tables, sorted by what held it.
+
+    ./run python bench/stuck_reasons.py --seeds 34,35   # bench/results/stuck_reasons.{json,md}
+
+Read from the episode logs of the ``nehmo`` rows (``bench/results/fresh/seed<S>/``; the logs are
+where those runs wrote them). For each stuck episode, with exact PyBullet distances:
+
+- ``goals closer than 5 cm``: with every arm at its goal, some pair is closer than the 0.05 m floor
+  of the margin, so no planner that keeps it can finish exactly;
+- ``blocked by a settled peer``: at the end an arm is within ``hold_tolerance`` of its goal
+  (settled) and a peer still far from its own (> 0.1 rad) is within 0.2 m of it;
+- ``mutual block``: no arm near a stalled arm is settled, but two arms are within 0.2 m;
+- ``alone``: the stalled arm is farther than 0.2 m from every other (a local minimum of its own
+  goal cost under the self-clearance rows, or a joint limit).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+from collections import Counter
+from pathlib import Path
+
+from nehmo_core.eval.episode_log import read_episode_log
+from nehmo_core.eval.metrics import goal_distance
+from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.planning.settings import PlannerSettings
+
+RESULTS = Path(__file__).resolve().parent / "results"
+SETUPS = {
+    "dual_ur5": ("table_II_dual_ur5.json", "nehmo"),
+    "triple_ur5": ("table_III_triple_ur5.json", "nehmo"),
+    "five_ur5": ("table_III_five_ur5.json", "nehmo"),
+    "ur5_kinova_challenging": ("table_IV_ur5_kinova_challenging.json", "nehmo/nehmo"),
+}
+NEAR, FLOOR, FAR_FROM_GOAL = 0.2, 0.05, 0.1  # [m], [m], [rad]
+REASONS = ("goals closer than 5 cm", "blocked by a settled peer", "mutual block", "alone")
+
+
+def reason(path: str, world: CellWorld | None) -> tuple[str, CellWorld]:
+    log = read_episode_log(path)
+    w = world or CellWorld(log.cell)
+    ids = list(log.cell.arm_ids)
+    pairs = list(itertools.combinations(ids, 2))
+    w.set_configuration({a: log.goals[a] for a in ids})
+    if min(w.distance(a, b) for a, b in pairs) < FLOOR:
+        return REASONS[0], w
+    final = {a: log.positions[a][-1] for a in ids}
+    w.set_configuration(final)
+    dist = {frozenset(p): w.distance(*p) for p in pairs}
+    err = {a: goal_distance(final[a], log.goals[a], log.cell, a, "l2") for a in ids}
+    settled = {a for a in ids if err[a] < PlannerSettings().hold_tolerance}
+    stalled = [a for a in ids if err[a] > FAR_FROM_GOAL]
+    for a in stalled:
+        if any(b in settled and dist[frozenset((a, b))] < NEAR for b in ids if b != a):
+            return REASONS[1], w
+    if any(dist[frozenset((a, b))] < NEAR for a in stalled for b in ids if b != a):
+        return REASONS[2], w
+    return REASONS[3], w
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", default="34,35")
+    args = parser.parse_args()
+    out: dict[str, dict[str, dict[str, int]]] = {}
+    lines = [
+        "# Why NeHMO episodes end stuck",
+        "",
+        "Stuck episodes of the `nehmo` rows of the fresh tables (100 episodes per setup and seed), "
+        "sorted by `bench/stuck_reasons.py` (definitions in its docstring).",
+        "",
+        "| setup | seed | stuck | " + " | ".join(REASONS) + " |",
+        "|---|---|---|" + "---|" * len(REASONS),
+    ]
+    for seed in (int(s) for s in args.seeds.split(",")):
+        for setup, (name, row_name) in SETUPS.items():
+            table = json.loads((RESULTS / "fresh" / f"seed{seed}" / name).read_text())
+            row = next(r for r in table["rows"] if r["row"] == row_name)
+            world = None
+            counts: Counter[str] = Counter()
+            for e in row["episodes"]:
+                if e["outcome"] == "stuck":
+                    why, world = reason(e["log"], world)
+                    counts[why] += 1
+            if world is not None:
+                world.close()
+            out.setdefault(setup, {})[str(seed)] = dict(counts)
+            lines.append(
+                f"| {setup} | {seed} | {sum(counts.values())} | "
+                + " | ".join(str(counts.get(r, 0)) for r in REASONS)
+                + " |"
+            )
+            print(lines[-1], flush=True)
+    (RESULTS / "stuck_reasons.json").write_text(json.dumps(out, indent=2) + "\n")
+    (RESULTS / "stuck_reasons.md").write_text("\n".join(lines) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
