@@ -163,7 +163,7 @@ def contact_states(
     batch: int = 20000,
     max_draws: int = 2_000_000,
 ) -> tuple[np.ndarray, int]:
-    """``count`` i.i.d. states of ``draw`` restricted to exact contact, by rejection.
+    """``count`` i.i.d. states of ``distribution`` restricted to exact contact, by rejection.
 
     Returns the states and how many were drawn in all.
     """
