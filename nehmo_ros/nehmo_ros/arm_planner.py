@@ -111,6 +111,12 @@ PARAMS: dict[str, Param] = {
     "self_clearance": Param(_PLANNER.self_clearance, "self-collision rows in Opt and fail-safe"),
     "escape": Param(_PLANNER.escape, "stall escape and yield at the goal"),
     "fail_safe": Param(_PLANNER.fail_safe, "single | maximin: the fail-safe against one or all"),
+    "fail_safe_slack": Param(
+        _PLANNER.fail_safe_slack,
+        "[m] maximin: how far below its best the worst pair may go to raise the next",
+        0.0,
+        1.0,
+    ),
     "hold_bound": Param(
         _PLANNER.hold_bound, "speed bound announced at the goal, share of u_max (1: none)", 0.0, 1.0
     ),
@@ -195,6 +201,7 @@ class ArmPlannerNode(Node):
             self_clearance=bool(p["self_clearance"]),
             escape=bool(p["escape"]),
             fail_safe=str(p["fail_safe"]),
+            fail_safe_slack=float(p["fail_safe_slack"]),
             hold_bound=float(p["hold_bound"]),
             hold_tolerance=float(p["hold_tolerance"]),
         )

@@ -15,16 +15,27 @@ episodes it let a pair at V = 0.11 m close to contact while serving one at 0.15 
 critical peer the answer is the paper's command. A small quadratic term on ``u`` (``ridge``)
 makes the solution unique: joints that do not change any critical V stay still instead of
 sweeping at full speed.
+
+Plain maximin is brittle when the arm can barely move the worst pair's value: in two five-UR5
+collisions (fresh seeds 34 and 35) the worst pair's peer could lower V at 0.4–0.65 m/s while the
+arm could raise it by at most 0.01–0.08 m/s, and maximin spent every joint on that pair, gaining
+2–4 mm of predicted V and driving the arm at 0.4 m/s into the other critical peer. So the command
+is *lexicographic* with a tolerance (``slack``): after each stage fixes the pairs that bind at the
+best smallest value ``s*``, later stages may lower those pairs to ``s* − slack`` but no further,
+and maximize the smallest value of the remaining pairs. ``slack = 0`` is plain maximin on the
+first stage (and exact leximin after it).
 Peers join the critical set within ``band`` of the smallest value and leave it only beyond
 ``2·band``, so a command does not flip when two values cross (:class:`MaximinFailSafe`).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
 
+from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.qp import qp_step
 
 __all__ = ["MaximinFailSafe", "maximin_command", "worst_case_rates"]
@@ -45,8 +56,10 @@ def maximin_command(
     values: np.ndarray | None = None,
     horizon: float = 0.1,
     ridge: float = 1e-3,
+    slack: float = 0.0,
 ) -> np.ndarray:
-    """The box-bounded command maximizing the smallest worst-case value ``horizon`` [s] ahead.
+    """The box-bounded command maximizing the smallest worst-case value ``horizon`` [s] ahead,
+    then (lexicographically, within ``slack`` [m] of each stage's optimum) the next smallest.
 
     ``own_grads`` (k, n) and ``peer_grads`` (k, m) are the pairs' gradients of V, ``values``
     (k,) their values now (None: all equal, i.e. the smallest worst-case rate); ``d_max`` the
@@ -58,23 +71,57 @@ def maximin_command(
     k, n = own_grads.shape
     if k == 1:
         return u_max * np.sign(own_grads[0])
+    if not slack >= 0.0:
+        raise InvalidValueError("slack", "must be >= 0 [m]", slack)
+    # predicted V_i = V_i + τ·(g_i·u − d̄‖h_i‖₁) = τ·(g_i·u − offset_i)
     offset = d_max * np.abs(peer_grads).sum(axis=1)
-    if values is not None:  # V_i + τ·rate_i ≥ s  ⇔  g_i·u − s/τ ≥ offset_i − V_i/τ
+    if values is not None:
         offset = offset - np.asarray(values, dtype=np.float64) / horizon
     scale = float(np.abs(own_grads).max()) or 1.0  # the problem in units of the largest gradient
-    g = own_grads / scale
-    bound = float(np.abs(g).sum(axis=1).max()) * u_max + float(np.abs(offset).max()) / scale + 1.0
-    # variables p = (u, s): min −s + ½·ridge·(‖u‖² + s²)  s.t.  g_i·u − s − offset_i/scale ≥ 0
+    g, offset = own_grads / scale, offset / scale  # rows: g_i·u − offset_i ≥ s (scaled rate)
+    floor = np.full(k, np.nan)  # fixed pairs: g_i·u − offset_i ≥ floor_i
+    free = np.ones(k, dtype=bool)
+    u = np.zeros(n)
+    while free.any():
+        u, s = _maximin_stage(g, offset, free, floor, u_max, ridge)
+        if u is None:  # cannot happen for this QP (the last stage's u is feasible); be safe
+            worst = int(np.argmax(np.where(free, offset, -np.inf)))
+            return u_max * np.sign(own_grads[worst])
+        rate = g @ u - offset
+        binding = free & (rate <= s + 1e-6 * max(1.0, abs(s)))
+        if not binding.any():
+            binding = free & (rate <= rate[free].min())
+        floor[binding] = s - slack / (horizon * scale)
+        free &= ~binding
+        if slack == 0.0:
+            break  # plain maximin: the first stage's command
+    return np.clip(u, -u_max, u_max)
+
+
+def _maximin_stage(
+    g: np.ndarray,
+    offset: np.ndarray,
+    free: np.ndarray,
+    floor: np.ndarray,
+    u_max: float,
+    ridge: float,
+) -> tuple[np.ndarray | None, float]:
+    """max s over (u, s): free rows g_i·u − offset_i ≥ s, fixed rows ≥ floor_i, |u| ≤ ū."""
+    k, n = g.shape
+    fixed = ~free
+    bound = float(np.abs(g).sum(axis=1).max()) * u_max + float(np.abs(offset).max()) + 1.0
+    # variables p = (u, s): min −s + ½·ridge·(‖u‖² + s²)
     hessian = ridge * np.eye(n + 1)
     linear = np.zeros(n + 1)
     linear[n] = -1.0
-    jac = np.hstack([g, -np.ones((k, 1))])
+    jac = np.hstack([g, -free[:, None].astype(np.float64)])
+    c = -offset - np.where(fixed, floor, 0.0)
     lo = np.concatenate([np.full(n, -u_max), [-bound]])
     hi = np.concatenate([np.full(n, u_max), [bound]])
-    step = qp_step(hessian, linear, -offset / scale, jac, lo, hi)
-    if step.flag < 1 or not np.all(np.isfinite(step.p)):  # cannot happen for this QP; be safe
-        return u_max * np.sign(own_grads[int(np.argmax(-offset))])
-    return np.clip(step.p[:n], -u_max, u_max)
+    step = qp_step(hessian, linear, c, jac, lo, hi)
+    if step.flag < 1 or not np.all(np.isfinite(step.p)):
+        return None, math.nan
+    return step.p[:n], float(step.p[n])
 
 
 class MaximinFailSafe:

@@ -313,7 +313,9 @@ class NehmoPlanner(StallEscape):
             )
             values = now.values[chosen]
             d_max = s.d_max * now.bounds[chosen]
-            return maximin_command(own, peer, u_max, d_max, values, s.t_plan)
+            return maximin_command(
+                own, peer, u_max, d_max, values, s.t_plan, slack=s.fail_safe_slack
+            )
         critical = int(np.argmin(now.values))
         g = now.grads[critical][: self.robot.dof]
         u = u_max * np.sign(g)

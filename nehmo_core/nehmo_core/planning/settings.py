@@ -65,6 +65,9 @@ class PlannerSettings:
     # the smallest V (planning/fail_safe.py)
     fail_safe: str = "maximin"
     fail_safe_band: float = 0.05
+    # the maximin fail-safe is lexicographic: it may lower the worst pair's predicted V by up to
+    # fail_safe_slack [m] below its best to raise the next pairs' (0: plain maximin)
+    fail_safe_slack: float = 0.005
     # announced speed bounds (not in the paper; planning/speed_bounds.py): an arm within
     # hold_tolerance [rad] (L2) of its goal announces hold_bound (a fraction of ū) and keeps its
     # commands within it until it leaves 2·hold_tolerance, gets a new goal or a peer that announces
@@ -144,6 +147,8 @@ class PlannerSettings:
             raise InvalidValueError("hold_tolerance", "must be > 0 [rad]", self.hold_tolerance)
         if not self.fail_safe_band >= 0.0:
             raise InvalidValueError("fail_safe_band", "must be >= 0 [m]", self.fail_safe_band)
+        if not self.fail_safe_slack >= 0.0:
+            raise InvalidValueError("fail_safe_slack", "must be >= 0 [m]", self.fail_safe_slack)
         if not self.self_safety >= 0.0:
             raise InvalidValueError("self_safety", "must be >= 0", self.self_safety)
         if not self.self_influence > self.self_safety:
