@@ -83,10 +83,11 @@ def maximin_command(
     free = np.ones(k, dtype=bool)
     u = np.zeros(n)
     while free.any():
-        u, s = _maximin_stage(g, offset, free, floor, u_max, ridge)
-        if u is None:  # cannot happen for this QP (the last stage's u is feasible); be safe
+        stage, s = _maximin_stage(g, offset, free, floor, u_max, ridge)
+        if stage is None:  # cannot happen for this QP (the last stage's u is feasible); be safe
             worst = int(np.argmax(np.where(free, offset, -np.inf)))
             return u_max * np.sign(own_grads[worst])
+        u = stage
         rate = g @ u - offset
         binding = free & (rate <= s + 1e-6 * max(1.0, abs(s)))
         if not binding.any():
@@ -107,7 +108,7 @@ def _maximin_stage(
     ridge: float,
 ) -> tuple[np.ndarray | None, float]:
     """max s over (u, s): free rows g_i·u − offset_i ≥ s, fixed rows ≥ floor_i, |u| ≤ ū."""
-    k, n = g.shape
+    n = g.shape[1]
     fixed = ~free
     bound = float(np.abs(g).sum(axis=1).max()) * u_max + float(np.abs(offset).max()) + 1.0
     # variables p = (u, s): min −s + ½·ridge·(‖u‖² + s²)
