@@ -34,10 +34,10 @@ TARGETS: dict[tuple[str, str], tuple[float, float]] = {
 #: What each reported seed has seen: a seed whose failures were read to change the planner is no
 #: longer untouched, and says so.
 SEED_NOTES: dict[int, str] = {
-    34: "seed 34's and 35's two five-UR5 collisions were read to find the fail-safe's "
+    34: "Seed 34's and 35's two five-UR5 collisions were read to find the fail-safe's "
     "lexicographic tolerance (`../options/failsafe_maximin.md`), so their three- and five-UR5 "
     "rows were rerun after that change and are no longer untouched",
-    36: "seeds 36 and 37 were first run after that change",
+    36: "Seeds 36 and 37 were first run after that change",
 }
 
 
@@ -74,9 +74,9 @@ def table(seeds: list[int]) -> str:
         "# Tables II–IV on fresh scenario seeds",
         "",
         f"Seeds {', '.join(map(str, seeds))}: scenario sets that were not used for tuning "
-        "(the development seed is 31, `../options/speed_bounds.md`), "
-        + "; ".join(SEED_NOTES[s] for s in seeds if s in SEED_NOTES)
-        + ". 100 episodes per row and seed, "
+        "(the development seed is 31, `../options/speed_bounds.md`). "
+        + "".join(SEED_NOTES[s] + ". " for s in seeds if s in SEED_NOTES)
+        + "100 episodes per row and seed, "
         "`nehmo` with its defaults (maximin fail-safe, announced speed bounds, certified "
         "margins: `../options/certified_margins.md`; the same rows with ε = 0.05 m everywhere: "
         "`fixed_eps/`), the baselines as in `../table_II.md`. Cells: SR / CR between arms / "
