@@ -22,8 +22,8 @@ arm could raise it by at most 0.01–0.08 m/s, and maximin spent every joint on 
 2–4 mm of predicted V and driving the arm at 0.4 m/s into the other critical peer. So the command
 is *lexicographic* with a tolerance (``slack``): after each stage fixes the pairs that bind at the
 best smallest value ``s*``, later stages may lower those pairs to ``s* − slack`` but no further,
-and maximize the smallest value of the remaining pairs. ``slack = 0`` is plain maximin on the
-first stage (and exact leximin after it).
+and maximize the smallest value of the remaining pairs. ``slack = 0`` stops after the first
+stage: plain maximin.
 Peers join the critical set within ``band`` of the smallest value and leave it only beyond
 ``2·band``, so a command does not flip when two values cross (:class:`MaximinFailSafe`).
 """
