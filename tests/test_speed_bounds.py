@@ -159,3 +159,44 @@ def test_a_settled_arm_withdraws_its_bound_from_a_peer_that_breaks_the_slow_game
     assert [r.telemetry.speed_bound for r in follow] == [1.0] * 3
     assert np.abs(follow[0].velocity).max() <= 0.1 + 1e-12
     assert np.abs(follow[1].velocity).max() == pytest.approx(0.5)
+
+
+def test_a_peer_that_announces_full_speed_is_held_to_half_its_settled_margin(
+    models: list,
+) -> None:
+    """A peer that takes part in the announcements (here at full speed) plans against the
+    settled arm's bound and keeps ``V(k·t_safe)`` at its settled margin, so a state between half
+    that margin and ε is no threat from it, though it is from a silent peer; below half the
+    margin it is a threat from either."""
+    settings = PlannerSettings(hold_bound=0.2, deadline=3600.0)
+    q_own = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
+    far = {PEER: np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])}
+    near = {PEER: np.array([0.0, -1.2, 1.0, 0.0, 0.0, 0.0])}
+    closer = {PEER: np.array([0.0, -1.1, 1.0, 0.0, 0.0, 0.0])}
+    probe = NehmoPlanner(CELL, OWN, models, settings)
+    margin = probe.group_margin(probe.pairs[PEER].model_index, 0.2)
+    slow = {PEER: 0.2}
+
+    def value(peers: dict) -> float:
+        return float(probe._evaluate_current(q_own, peers, [PEER], slow).values[0])
+
+    # the states fall where the test means them to
+    assert 0.5 * margin < value(near) < probe.settings.epsilon
+    assert value(closer) < 0.5 * margin
+    for peers, told, expected in (
+        (near, {PEER: 1.0}, 0.2),  # a participant within its margin's tolerance: stay
+        (near, None, 1.0),  # the same state from a silent peer: withdraw
+        (closer, {PEER: 1.0}, 1.0),  # a participant well inside the margin: withdraw
+    ):
+        planner = NehmoPlanner(CELL, OWN, models, settings)
+        assert planner.plan(q_own, far, q_own, told).telemetry.speed_bound == 0.2
+        assert planner.plan(q_own, peers, q_own, told).telemetry.speed_bound == expected
+
+
+def test_only_peers_that_announce_are_reported_as_taking_part() -> None:
+    bounds = PeerBounds(D)
+    bounds.observe("silent", 0.0, np.zeros(6))
+    bounds.observe("b", 0.0, np.zeros(6))
+    bounds.announce("b", 1.0)
+    assert bounds.bounds() == {"b": 1.0}
+    assert bounds.bounds(["silent", "b", "unknown"]) == {"b": 1.0}

@@ -13,7 +13,9 @@
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once a second, at once when not OK;
 - publishes ``/<id>/planner/speed_bound`` (std_msgs/Float64) with every command, the speed bound
   the arm keeps (a share of ``u_max``; 1: none), and subscribes to every peer's: a peer that
-  keeps its bound is planned against it (:mod:`nehmo_core.planning.speed_bounds`).
+  keeps its bound is planned against it (:mod:`nehmo_core.planning.speed_bounds`). Planners that
+  announce nothing (``naive``, ``reckless``, ...) publish nothing there, so peers treat them as
+  silent.
 
 The solve runs in a worker thread (:class:`nehmo_ros.control.ArmController`): the command of
 tick k was planned from the observations of tick k−1; missed deadlines, solver failures and
@@ -332,7 +334,8 @@ class ArmPlannerNode(Node):
         command = Float64MultiArray(data=[float(u) for u in decision.velocity])
         self.command_pub.publish(command)
         self.published["commands"] += 1
-        self.bound_pub.publish(Float64(data=self.controller.announcement))
+        if self.controller.announces:  # a planner that announces nothing stays silent
+            self.bound_pub.publish(Float64(data=self.controller.announcement))
         period = math.nan if self._last_publish is None else now - self._last_publish
         self._last_publish = now
         status = self._status(decision, period, time.time_ns())

@@ -200,7 +200,8 @@ class ArmController:
             self._bounds.announce(arm_id, bound)
 
     def peer_bounds(self) -> dict[str, float]:
-        """The bound each peer is planned against now (1: none, or it broke its word)."""
+        """The bound each announcing peer is planned against now (1: it broke its word or
+        announces full speed); peers never heard from are left out (silent, full speed)."""
         with self._bounds_lock:
             return self._bounds.bounds(self.peer_ids)
 
@@ -357,7 +358,9 @@ class ArmController:
     def _hold(self, status: str) -> Decision:
         return Decision(zeros(self.robot.dof), status, hold=True)
 
-    def _announces(self) -> bool:
+    @property
+    def announces(self) -> bool:
+        """Whether this arm's planner takes part in the speed-bound announcements."""
         return hasattr(self.planner, "announcement")
 
     def _fail_safe_velocity(
@@ -384,7 +387,7 @@ class ArmController:
             return self._hold("waiting_for_peers")
         doubtful = obs.stale or obs.untrusted
         # the peers' bounds once per tick: the fail-safe and the solve then share one evaluation
-        bounds = self.peer_bounds() if self._announces() else None
+        bounds = self.peer_bounds() if self.announces else None
         if doubtful and self.settings.stale_policy == "hold":
             # hold, and let a late solve of this tick fall back to holding too: never steer by
             # a stale or untrusted peer state

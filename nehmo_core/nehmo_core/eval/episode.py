@@ -225,7 +225,8 @@ def _loop(
                     result = planner.plan(observed[a], observed, scenario.goal[a])
                 planned[a] = np.array(result.velocity, dtype=np.float64)
                 t = result.telemetry
-                announced[a] = t.speed_bound
+                if isinstance(planner, NehmoPlanner):  # the others announce nothing
+                    announced[a] = t.speed_bound
                 rec.plan_times[a].append(float(t.solve_time))
                 rec.statuses[a][t.status] += 1
                 rec.fail_safe[a] += int(t.fail_safe)

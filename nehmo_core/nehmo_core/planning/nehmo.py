@@ -185,6 +185,7 @@ class NehmoPlanner(StallEscape):
         q: np.ndarray,
         peers: Mapping[str, np.ndarray],
         bounds: Mapping[str, float],
+        participants: frozenset[str],
     ) -> float:
         """This command's announcement (a fraction of ū; see :mod:`.speed_bounds`): hold_bound
         from within hold_tolerance of the goal until beyond twice that, or until a peer breaks
@@ -192,7 +193,7 @@ class NehmoPlanner(StallEscape):
         s = self.settings
         if s.hold_bound < FULL_SPEED:
             e = float(np.linalg.norm(error0))
-            if e > 2.0 * s.hold_tolerance or self._threatened(q, peers, bounds):
+            if e > 2.0 * s.hold_tolerance or self._threatened(q, peers, bounds, participants):
                 self._holding = False
             elif e <= s.hold_tolerance:
                 self._holding = True
@@ -201,18 +202,33 @@ class NehmoPlanner(StallEscape):
         return announced
 
     def _threatened(
-        self, q: np.ndarray, peers: Mapping[str, np.ndarray], bounds: Mapping[str, float]
+        self,
+        q: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        bounds: Mapping[str, float],
+        participants: frozenset[str],
     ) -> bool:
-        """Whether a peer that announces nothing has broken the slow game with this arm near its
-        goal: ``V(k·t_plan, x) < ε`` with ``k = hold_bound``. A NeHMO peer plans against the
-        bound this arm announces and keeps ``V(k·t_safe) ≥ ε`` (so also at ``k·t_plan``); one
-        that does not (a reckless arm) is fled from at full speed, after the withdrawal."""
+        """Whether a peer at full speed has broken the slow game with this arm near its goal.
+
+        A participant (a peer that announces, :mod:`.speed_bounds`) plans against this arm's
+        bound ``k = hold_bound`` and keeps ``V(k·t_safe)`` at or above its settled margin, so
+        also ``V(k·t_plan)`` up to its linearization error: it breaks the game only below half
+        that margin. A peer that announces nothing (a reckless arm) breaks it below ε. Either
+        is fled from at full speed, after the withdrawal."""
         s = self.settings
         ids = [p for p in self.pairs if bounds[p] >= FULL_SPEED]
         if not ids:
             return False
         slow = self._evaluate_current(q, peers, ids, dict.fromkeys(ids, s.hold_bound))
-        return bool(slow.values.min() < s.epsilon)
+        floor = np.array(
+            [
+                0.5 * self.group_margin(self.pairs[p].model_index, s.hold_bound)
+                if p in participants
+                else s.epsilon
+                for p in ids
+            ]
+        )
+        return bool(np.any(slow.values < floor))
 
     @property
     def announcement(self) -> float:
@@ -360,8 +376,9 @@ class NehmoPlanner(StallEscape):
         """One tick: the command for ``q_self`` among ``peers`` toward ``q_goal``.
 
         ``peer_bounds``: the speed bound (a fraction of d̄) each peer has announced and still
-        keeps (:class:`~nehmo_core.planning.speed_bounds.PeerBounds`); missing peers: 1. The
-        command's own announcement is ``telemetry.speed_bound``.
+        keeps (:class:`~nehmo_core.planning.speed_bounds.PeerBounds`); the peers in it take part
+        in the announcements (they plan against this arm's), missing peers are planned at 1 and
+        treated as silent. The command's own announcement is ``telemetry.speed_bound``.
         """
         start = time.perf_counter()
         deadline = start + self.settings.deadline
@@ -380,7 +397,8 @@ class NehmoPlanner(StallEscape):
             self._goal = goal.copy()
         error0 = goal_error(q, goal, self.robot, self.settings.wrap_goal)
         bounds = self._peer_bounds(peer_bounds)
-        announced = self._announce(error0, q, others, bounds)
+        participants = frozenset(p for p in peer_bounds or {} if p in self.pairs)
+        announced = self._announce(error0, q, others, bounds, participants)
         cap = self.speed_cap
         info: dict[str, Any] = {
             "peers_constrained": tuple(self.pairs),

@@ -48,7 +48,7 @@ class PlannerSettings:
     certified_epsilon: bool = True
     # with certified margins, the floor [m] of rows against a peer that announced a speed bound:
     # they keep min(raised epsilon, max(settled_epsilon, their model's δ at hold_bound·t_safe))
-    settled_epsilon: float = 0.05
+    settled_epsilon: float = 0.02
     t_plan: float = 0.1  # planning horizon: the command is held this long
     t_safe: float = 0.3  # time-to-go at which V must stay ≥ epsilon after the step
     u_max: float = 0.5  # ū: own joint speed bound
@@ -70,10 +70,10 @@ class PlannerSettings:
     fail_safe_slack: float = 0.005
     # announced speed bounds (not in the paper; planning/speed_bounds.py): an arm within
     # hold_tolerance [rad] (L2) of its goal announces hold_bound (a fraction of ū) and keeps its
-    # commands within it until it leaves 2·hold_tolerance, gets a new goal or a peer that announces
-    # nothing breaks V(hold_bound·t_plan) ≥ ε with it, announcing the
-    # withdrawal bound_release_ticks commands ahead; peers that keep their announcement are
-    # planned against V(k·t_safe). hold_bound = 1: announce nothing (the paper)
+    # commands within it until it leaves 2·hold_tolerance, gets a new goal or a peer breaks
+    # V(hold_bound·t_plan) ≥ ε with it (half its settled margin for a peer that announces),
+    # announcing the withdrawal bound_release_ticks commands ahead; peers that keep their
+    # announcement are planned against V(k·t_safe). hold_bound = 1: announce nothing (the paper)
     hold_bound: float = 0.2
     hold_tolerance: float = 0.05
     bound_release_ticks: int = 2

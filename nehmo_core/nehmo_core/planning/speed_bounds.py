@@ -15,11 +15,13 @@ The promise is made by a NeHMO arm that has settled at its goal (:class:`NehmoPl
 ``hold_bound < 1``): it announces ``k = hold_bound`` with every command and keeps its own
 commands within ``k·ū`` from then on, including its fail-safe. A withdrawal (a new goal,
 drifting beyond ``2·hold_tolerance``, or a threat) is announced ``release_ticks`` commands before
-the arm moves faster, so peers hear it before it matters. The threat: a NeHMO peer plans against
-the settled arm's bound and so keeps ``V(k·t_safe) ≥ ε`` with it; a peer that announces nothing
-and brings ``V(k·t_plan)`` below ε is not doing so (a reckless arm), and the settled arm
-withdraws to flee it at full speed. The price that remains: the two commands before the arm may
-speed up.
+the arm moves faster, so peers hear it before it matters. The threat: a NeHMO peer (one that
+announces, even only full speed) plans against the settled arm's bound and so keeps
+``V(k·t_safe)`` at or above its settled margin with it; it is a threat only when it brings
+``V(k·t_plan)`` below half that margin (beyond what its linearized steps can explain). A peer
+that announces nothing is a threat as soon as it brings ``V(k·t_plan)`` below ε (a reckless arm).
+Either way the settled arm withdraws to flee at full speed. The price that remains: the two
+commands before the arm may speed up.
 
 :class:`PeerBounds` is the receiving side: it keeps each peer's announcement and checks the
 peer's observed motion against it; the tick a peer moves faster than it announced (with a
@@ -58,6 +60,7 @@ class _Peer:
     t: float = 0.0
     broken: bool = False  # moved faster than announced; distrusted until it re-announces
     breaches: int = 0
+    heard: bool = False  # has announced at all: it takes part in the announcements
 
 
 class PeerBounds:
@@ -94,6 +97,7 @@ class PeerBounds:
         """Record ``peer``'s newest announcement (a fraction of ``d_max``)."""
         p = self._peer(peer)
         bound = check_bound(bound)
+        p.heard = True
         if p.broken and bound >= FULL_SPEED:
             p.broken = False  # withdrawn: its next announcement is trusted again
         p.announced.append(bound)
@@ -120,9 +124,11 @@ class PeerBounds:
         return p.announced[-1]
 
     def bounds(self, peers: Iterable[str] | None = None) -> dict[str, float]:
-        """:meth:`bound` of every known peer (or of the ids ``peers``)."""
+        """:meth:`bound` of every peer that has announced (of those among ``peers`` if given).
+        A peer never heard from is left out: it takes no part in the announcements (a planner
+        plans it at full speed and treats it as silent)."""
         ids = self._peers if peers is None else peers
-        return {p: self.bound(p) for p in ids}
+        return {p: self.bound(p) for p in ids if p in self._peers and self._peers[p].heard}
 
     def breaches(self, peer: str) -> int:
         """How often ``peer`` was caught moving faster than it announced."""
