@@ -79,3 +79,49 @@ def test_shipped_ur5_pair_distance_is_certified_below_the_planner_margin() -> No
         assert (margin(near.draw(200, rng), 1.0) <= 0.0).mean() > 0.5
     finally:
         margin.close()
+
+
+@pytest.mark.parametrize(
+    "pair", ["ur5_ur5", "ur5_ur5_opposite", "ur5_kinova", "kinova_ur5", "ur5_ur5_any"]
+)
+def test_the_ball_covers_never_call_a_contact_apart(pair: str) -> None:
+    """The prefilter is sound: where the covers are apart the arms are apart, and no closer
+    than the covers say; states drawn near contacts put it to the test where it matters."""
+    from nehmo_core.hjr import make_system
+
+    system = make_system(pair)
+    margin = exact_margin(system)
+    try:
+        rng = np.random.default_rng(3)
+        uniform = UniformBox(system).draw(1500, rng)
+        touching = uniform[margin(uniform, 1.0) <= 0.0]
+        near = NearVisited(VisitedStates(touching), joints=12, low=0.02, high=0.1)
+        x = np.concatenate([uniform, near.draw(1500, rng)])
+        bound, exact = margin.lower_bound(x), margin(x, 3.0)
+        apart = bound > 0.0
+        assert apart.mean() > 0.3 and (exact <= 0.0).sum() > 100  # both kinds are tested
+        assert np.all(exact[apart] > 0.0)
+        assert np.all(bound[apart] <= exact[apart] + 1e-9)
+    finally:
+        margin.close()
+
+
+class _NoPrefilter:
+    def __init__(self, margin) -> None:  # type: ignore[no-untyped-def]
+        self.margin = margin
+
+    def __call__(self, x: np.ndarray, cutoff: float) -> np.ndarray:
+        return self.margin(x, cutoff)
+
+
+def test_the_prefilter_keeps_the_same_contact_states() -> None:
+    system = make_arm_pair_system("ur5_kinova")
+    margin = exact_margin(system)
+    try:
+        fast, drawn = contact_states(UniformBox(system), margin, 40, np.random.default_rng(5), 500)
+        plain, drawn_plain = contact_states(
+            UniformBox(system), _NoPrefilter(margin), 40, np.random.default_rng(5), 500
+        )
+        assert drawn == drawn_plain and np.array_equal(fast, plain)
+    finally:
+        margin.close()

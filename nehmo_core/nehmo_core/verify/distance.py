@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.geometry.distance_model import PairDistanceModel
@@ -162,23 +163,35 @@ def contact_states(
     rng: np.random.Generator,
     batch: int = 20000,
     max_draws: int = 2_000_000,
+    progress: bool = False,
 ) -> tuple[np.ndarray, int]:
     """``count`` i.i.d. states of ``distribution`` restricted to exact contact, by rejection.
 
-    Returns the states and how many were drawn in all.
+    Returns the states and how many were drawn in all. A margin with a ``lower_bound`` (the arm
+    pairs' ball covers, :meth:`~nehmo_core.verify.truth.PairDistance.lower_bound`) has the exact
+    geometry queried only where that bound allows contact; the states kept are the same, found
+    faster where contacts are rare.
     """
+    prefilter = getattr(margin, "lower_bound", None)
     kept: list[np.ndarray] = []
     have = drawn = 0
+    bar = tqdm(total=count, desc="contact states", unit="state", disable=not progress)
     while have < count:
         if drawn >= max_draws:
+            bar.close()
             raise NehmoError(
                 f"only {have} of {drawn} drawn states are in contact; need count = {count}"
             )
         x = distribution.draw(batch, rng)
         drawn += x.shape[0]
-        hit = x[margin(x, 1.0) <= 0.0]
+        if prefilter is not None:
+            x = x[prefilter(x) <= 0.0]
+        hit = x[margin(x, 1e-3) <= 0.0] if x.shape[0] else x
         kept.append(hit)
         have += hit.shape[0]
+        bar.update(min(hit.shape[0], count - bar.n))
+        bar.set_postfix(drawn=drawn)
+    bar.close()
     return np.concatenate(kept)[:count], drawn
 
 
@@ -191,12 +204,15 @@ def certify_distance(
     alpha: float = 0.01,
     beta: float = 1e-3,
     max_draws: int = 4_000_000,
+    progress: bool = False,
 ) -> DistanceCertificate:
     """Certify ``model`` on ``samples`` contact states of ``distribution`` (see
     :class:`DistanceCertificate`)."""
     if samples < 1:
         raise InvalidValueError("samples", "must be >= 1", samples)
-    states, drawn = contact_states(distribution, margin, samples, rng, max_draws=max_draws)
+    states, drawn = contact_states(
+        distribution, margin, samples, rng, max_draws=max_draws, progress=progress
+    )
     learned = np.asarray(model.distance(states), dtype=np.float64)
     level = certified_level(learned, alpha, beta)
     k = int((learned > level).sum()) if np.isfinite(level) else samples

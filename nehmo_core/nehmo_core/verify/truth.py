@@ -11,9 +11,12 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+import pybullet as pb
 import torch
 
+from nehmo_core.errors import NehmoError
 from nehmo_core.geometry.distance_data import CONDITIONED_PAIRS, PAIRS, pair_cell
+from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
 from nehmo_core.robots.model import Cell, Pose
@@ -34,6 +37,91 @@ def pair_arms(name: str) -> tuple[Cell, str, str]:
     return pair_cell(name)
 
 
+def _matrix(position: tuple[float, ...], quaternion: tuple[float, ...]) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = np.reshape(pb.getMatrixFromQuaternion(quaternion), (3, 3))
+    T[:3, 3] = position
+    return T
+
+
+def inertial_offset(world: CellWorld, arm_id: str) -> np.ndarray:
+    """The base link's inertial frame in its link frame (4, 4): PyBullet poses bases by it."""
+    local = pb.getDynamicsInfo(world.body(arm_id), -1, physicsClientId=world.client)[3:5]
+    return _matrix(local[0], local[1])
+
+
+def base_link_frame(world: CellWorld, arm_id: str) -> np.ndarray:
+    """Where the arm's base link frame is now in the world (4, 4)."""
+    com = pb.getBasePositionAndOrientation(world.body(arm_id), physicsClientId=world.client)
+    return _matrix(com[0], com[1]) @ np.linalg.inv(inertial_offset(world, arm_id))
+
+
+class SphereCover:
+    """Balls that cover one arm's collision geometry, fixed in its link frames.
+
+    Built from PyBullet itself: with the arm at ``q = 0`` each colliding link's world AABB
+    (collision margin included) is cut along its longest side into near-cubes, and each piece's
+    circumscribed ball is carried into the link frame. The balls only ever over-cover, so the
+    distance between two covers is a lower bound on the exact distance of arms that are apart,
+    which makes :meth:`PairDistance.lower_bound` a sound prefilter: a state whose covers are
+    apart is not in contact. (In penetration both are negative, and the covers' overlap need not
+    bound PyBullet's penetration depth.)
+    """
+
+    def __init__(self, world: CellWorld, arm_id: str, pieces: int = 4) -> None:
+        arm = world.cell.arm(arm_id)
+        self.kinematics = ArmKinematics(arm.robot)  # in the arm's own base frame
+        body = world.body(arm_id)
+        world.set_joint_positions(arm_id, np.zeros(arm.robot.dof))
+        base_pose = base_link_frame(world, arm_id)
+        at_zero = self.kinematics.link_transforms(
+            torch.zeros(1, arm.robot.dof, dtype=torch.float64)
+        )
+        links, centres, radii = [], [], []
+        for name, index in world._link_index[arm_id].items():
+            if not pb.getCollisionShapeData(body, index, physicsClientId=world.client):
+                continue  # no collision geometry
+            if name not in at_zero:
+                raise NehmoError(f"link {name!r} of {arm_id} collides but is not on the chain")
+            lo, hi = (np.array(v) for v in pb.getAABB(body, index, physicsClientId=world.client))
+            side = hi - lo
+            axis = int(np.argmax(side))
+            count = int(min(pieces, max(1, np.ceil(side[axis] / max(np.median(side), 1e-6)))))
+            step = side[axis] / count
+            piece = side.copy()
+            piece[axis] = step
+            T_world_link = base_pose @ at_zero[name][0].numpy()
+            T_link_world = np.linalg.inv(T_world_link)
+            for k in range(count):
+                centre = lo + 0.5 * piece
+                centre[axis] = lo[axis] + (k + 0.5) * step
+                links.append(name)
+                centres.append(T_link_world[:3, :3] @ centre + T_link_world[:3, 3])
+                radii.append(0.5 * float(np.linalg.norm(piece)))
+        self.links = links
+        self.centres = np.array(centres)  # (S, 3) in each ball's link frame
+        self.radii = np.array(radii)  # (S,) [m]
+        order = list(dict.fromkeys(links))  # balls grouped by link, in the order world() returns
+        self._by_link = [
+            (n, torch.as_tensor(self.centres[[i for i, m in enumerate(links) if m == n]]))
+            for n in order
+        ]
+        perm = [i for n in order for i, m in enumerate(links) if m == n]
+        self.links = [links[i] for i in perm]
+        self.centres, self.radii = self.centres[perm], self.radii[perm]
+
+    def world(self, q: np.ndarray, base: np.ndarray) -> torch.Tensor:
+        """Ball centres (B, S, 3) for joint angles ``q (B, dof)`` and base poses ``(B, 4, 4)``."""
+        tf = self.kinematics.link_transforms(torch.as_tensor(q, dtype=torch.float64))
+        base_t = torch.from_numpy(np.array(base, dtype=np.float64))
+        parts = []
+        for name, centres in self._by_link:
+            T = base_t @ tf[name]
+            parts.append(T[:, None, :3, :3] @ centres[None, :, :, None])
+            parts[-1] = parts[-1][..., 0] + T[:, None, :3, 3]
+        return torch.cat(parts, dim=1)
+
+
 class PairDistance:
     """Exact signed distance [m] of a shipped arm pair, ``x = (q¹, q²)`` in the system's order.
 
@@ -47,6 +135,8 @@ class PairDistance:
         self.conditioned = bool(system.conditions)
         self.world = CellWorld(cell)
         self._r: float | None = None
+        self._covers: tuple[SphereCover, SphereCover] | None = None
+        self._fixed: tuple[np.ndarray, np.ndarray] = (np.eye(4), np.eye(4))
 
     def _place(self, r: float) -> None:
         if r != self._r:
@@ -63,6 +153,34 @@ class PairDistance:
             self.world.set_joint_positions(self.arm_b, state[n1 : n1 + n2])
             out[i] = self.world.distance(self.arm_a, self.arm_b, cutoff)
         return out
+
+    def lower_bound(self, x: np.ndarray) -> np.ndarray:
+        """From the arms' ball covers (:class:`SphereCover`), cheap and batched: a value (B,) [m]
+        that is positive only where :meth:`__call__` is, and then no larger."""
+        if self._covers is None:
+            self._covers = (
+                SphereCover(self.world, self.arm_a),
+                SphereCover(self.world, self.arm_b),
+            )
+            self._fixed = (
+                base_link_frame(self.world, self.arm_a),
+                base_link_frame(self.world, self.arm_b),
+            )
+        x = np.asarray(x, dtype=np.float64)
+        n1, n2, batch = self.n1, self.n2, x.shape[0]
+        base_a = np.broadcast_to(self._fixed[0], (batch, 4, 4))
+        if self.conditioned:  # as _place poses it: PyBullet sets the base's inertial frame
+            placed = Pose((0.0, 0.0, 0.0), (0.0, 0.0, math.pi)).matrix()
+            placed = placed @ np.linalg.inv(inertial_offset(self.world, self.arm_b))
+            base_b = np.repeat(placed[None], batch, axis=0)
+            base_b[:, 0, 3] += x[:, n1 + n2]
+        else:
+            base_b = np.broadcast_to(self._fixed[1], (batch, 4, 4))
+        a, b = self._covers
+        ca = a.world(x[:, :n1], base_a)
+        cb = b.world(x[:, n1 : n1 + n2], base_b)
+        gap = torch.cdist(ca, cb) - torch.as_tensor(a.radii[:, None] + b.radii[None, :])
+        return gap.amin(dim=(1, 2)).numpy()
 
     def close(self) -> None:
         self.world.close()
