@@ -213,11 +213,15 @@ def test_an_arm_between_two_pushing_peers_chatters_less_and_collides_no_more_oft
 SANDWICHED = Path(__file__).parent / "data" / "sandwiched"
 
 
-@pytest.mark.parametrize("name", ["five_ur5_seed34_0076", "five_ur5_seed35_0061"])
-def test_five_arms_where_plain_maximin_collided_stay_apart(name: str) -> None:
+@pytest.mark.parametrize(
+    ("name", "plain_collides"), [("five_ur5_seed34_0076", False), ("five_ur5_seed35_0061", True)]
+)
+def test_five_arms_where_plain_maximin_collided_stay_apart(name: str, plain_collides: bool) -> None:
     """Two fresh-seed five-UR5 scenarios (tables of seeds 34 and 35) where an arm between two
     peers, on the plain maximin fail-safe, drove into one of them; with the default lexicographic
-    tolerance no arm touches another."""
+    tolerance no arm touches another. (Since settled arms tell announcing peers from silent
+    ones, seed 34's scenario no longer brings plain maximin into contact; seed 35's still does,
+    so the test can fail.)"""
     scenarios = load_scenario_set(SANDWICHED / f"{name}.json")
     cell = load_cell("five_ur5")
     scenario = scenarios.scenarios[0]
@@ -230,5 +234,6 @@ def test_five_arms_where_plain_maximin_collided_stay_apart(name: str) -> None:
         )
         result = run_episode(cell, scenario, planners, settings)
         outcomes[slack] = [c for c in result.collisions if c.arm_a != c.arm_b]
-    assert outcomes[0.0], "the scenario no longer reproduces the plain-maximin collision"
+    if plain_collides:
+        assert outcomes[0.0], "the scenario no longer reproduces the plain-maximin collision"
     assert not outcomes[PlannerSettings().fail_safe_slack]

@@ -11,6 +11,7 @@ from collections.abc import Mapping, Sequence
 
 from nehmo_core.errors import NehmoError
 from nehmo_core.eval.setups import is_centralized
+from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS
 from nehmo_core.planning.factory import centralized_trackers, make_planner
 from nehmo_core.planning.interface import Planner
 from nehmo_core.planning.models import OPT_KINDS, SHIPPED_PAIRS, ModelRegistry
@@ -44,7 +45,12 @@ def _missing_models(
     own = cell.arm(arm_id).robot.name
     need = sorted({(own, cell.arm(p).robot.name) for p in peers})
     loaded = [f"{m.name} ({m.robot1}, {m.robot2})" for m in models]
-    shipped = [f"{name} {pair}" for pair, names in SHIPPED_PAIRS.items() for name in names]
+    shipped = [
+        f"{name} {pair}"
+        for pair, names in SHIPPED_PAIRS.items()
+        for name in names
+        if name in SHIPPED_VALUE_FUNCTIONS  # not an optional model that is not trained yet
+    ]
     return NehmoError(
         f"arm {arm_id!r} ({kind}) has peers {list(peers)} that no value model covers; "
         f"it needs pair models {need} (robot1 = the planning arm). Sources used: "

@@ -164,10 +164,11 @@ def distance_value_and_gradient(model: PairDistanceModel, q: ca.MX) -> tuple[ca.
 def swapped_distance_value_and_gradient(
     model: PairDistanceModel, q: ca.MX, n_first: int
 ) -> tuple[ca.MX, ca.MX]:
-    """``(l, ∇_q l)`` of ``l(q) = d(q[n_first:], q[:n_first])`` with ``d`` = ``model``.
+    """``(l, ∇_q l)`` of ``l(q) = d(q₂, q₁[, r])`` for ``q = (q₁, q₂[, r])``, ``d`` = ``model``.
 
-    ``q`` (n1 + n2,) [rad] holds the model's second arm first (``n_first`` = its joint count),
-    as :class:`~nehmo_core.hjr.systems.arm_pairs.SwappedBoundary` does in torch.
+    ``q`` (n1 + n2 [+ 1],) [rad] holds the model's second arm first (``n_first`` = its joint
+    count), then its first arm, then a conditioned model's base distance ``r`` [m], as
+    :class:`~nehmo_core.hjr.systems.arm_pairs.SwappedBoundary` does in torch.
     """
     if n_first != model.n2:
         raise InvalidValueError(
@@ -175,8 +176,10 @@ def swapped_distance_value_and_gradient(
         )
     if q.shape[0] != model.dof:
         raise InvalidValueError("q", f"must have {model.dof} rows", q.shape[0])
-    value, grad = distance_value_and_gradient(model, ca.vertcat(q[n_first:], q[:n_first]))
-    return value, ca.vertcat(grad[model.n1 :], grad[: model.n1])
+    n = model.n1 + model.n2
+    swapped = ca.vertcat(q[n_first:n], q[:n_first], q[n:])
+    value, grad = distance_value_and_gradient(model, swapped)
+    return value, ca.vertcat(grad[model.n1 : n], grad[: model.n1], grad[n:])
 
 
 def distance_expression(model: PairDistanceModel, q: ca.MX) -> ca.MX:

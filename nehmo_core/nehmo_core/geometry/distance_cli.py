@@ -18,7 +18,7 @@ from nehmo_core.geometry.distance_data import (
     DatasetSpec,
     generate,
 )
-from nehmo_core.geometry.distance_model import MODELS_DIR, load_distance_file
+from nehmo_core.geometry.distance_model import distance_model_path, load_distance_file
 from nehmo_core.geometry.distance_train import (
     DistanceTrainSettings,
     calibrate_offset,
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "calibrate":
         return _calibrate(args)
     if args.action == "evaluate":
-        path = args.model or MODELS_DIR / f"distance_{args.pair}.safetensors"
+        path = args.model or distance_model_path(args.pair)
         q, d, _ = load_dataset(args.data)
         print(json.dumps(evaluate(load_distance_file(path, args.pair), q, d), indent=2))
         return 0
@@ -108,7 +108,7 @@ def load_dataset(path: Path) -> tuple[np.ndarray, np.ndarray, dict[str, object]]
 
 def _calibrate(args: argparse.Namespace) -> int:
     """Offset = max(current, the one the calibration set needs); the card records both."""
-    path = args.model or MODELS_DIR / f"distance_{args.pair}.safetensors"
+    path = args.model or distance_model_path(args.pair)
     model = load_distance_file(path, args.pair)
     card = json.loads(path.with_suffix(".json").read_text())
     before = float(model.output_offset)
@@ -157,7 +157,7 @@ def _train(args: argparse.Namespace) -> int:
     if args.test is not None:
         qt, dt, meta_t = load_dataset(args.test)
         card["accuracy_held_out"] = {"data": meta_t, **evaluate(model, qt, dt)}
-    out = args.out or MODELS_DIR / f"distance_{args.pair}.safetensors"
+    out = args.out or distance_model_path(args.pair)
     model.save(out, card)
     print(
         json.dumps({k: card[k] for k in ("training", "accuracy_held_out") if k in card}, indent=2)

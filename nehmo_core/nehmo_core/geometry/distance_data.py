@@ -1,9 +1,11 @@
 """Seeded datasets of exact arm-arm signed distances, stratified toward contact.
 
 A pair is two arms of a shipped cell (``ur5_ur5``: the dual-UR5 cell, ``ur5_kinova``: the
-UR5-Kinova cell). Samples are joint vectors ``q = (q¹, q²)`` (N, n1 + n2) [rad] drawn
-uniformly over each arm's sampling box, plus "boundary" samples: uniform samples whose distance
-is below ``near`` [m], perturbed by Gaussian noise so that the set concentrates around contact.
+UR5-Kinova cell) or, for a pose-conditioned pair (``ur5_ur5_any``, ``ur5_kinova_any``), two
+robots with arm 2 at any base distance ``r`` in front of arm 1 (``r`` is then a model input).
+Samples are joint vectors ``q = (q¹, q²)`` (N, n1 + n2) [rad] drawn uniformly over each arm's
+sampling box, plus "boundary" samples: uniform samples whose distance is below ``near`` [m],
+perturbed by Gaussian noise so that the set concentrates around contact.
 Labels come from PyBullet on the arms' collision geometry (negative in penetration), clipped
 at ``cutoff`` [m].
 """
@@ -37,6 +39,12 @@ CONDITIONED_PAIRS: dict[str, tuple[str, str]] = {
     "ur5_ur5_any": ("ur5", "ur5"),
     "ur5_kinova_any": ("ur5", "kinova_gen3_6dof"),
 }
+SWAPPED_PAIRS: dict[str, str] = {
+    # arm-pair system name: the pair whose learned distance it reuses with the arms' roles
+    # exchanged (its arm 1 is the pair's arm 2): the Kinova's side of the UR5-Kinova pairs.
+    "kinova_ur5": "ur5_kinova",
+    "kinova_ur5_any": "ur5_kinova_any",
+}
 BASE_RANGE = (0.25, 1.7)
 """Base distances [m] the conditioned models are trained on (Ha et al.'s layouts: 0.31-1.60)."""
 CUTOFF = 1.0
@@ -60,6 +68,37 @@ def pair_cell(pair: str) -> tuple[Cell, str, str]:
         raise UnknownNameError("arm pair", pair, [*PAIRS, *CONDITIONED_PAIRS])
     cell_name, a, b = PAIRS[pair]
     return load_cell(cell_name), a, b
+
+
+def system_pair_cell(name: str) -> tuple[Cell, str, str]:
+    """The cell of an arm-pair system and its two arm ids in the system's order (arm 1, arm 2).
+
+    A pair of :data:`PAIRS` or :data:`CONDITIONED_PAIRS` is its own cell. A swapped system
+    (:data:`SWAPPED_PAIRS`) is its pair's cell seen from the other base: the arms swap. For a
+    fixed pair that is the same cell (a rigid motion); for a conditioned one the cell is rebuilt
+    in the swapped game's canonical frame (its arm 1 at the origin, its arm 2 at the origin
+    facing it, to be moved to ``(r, 0, 0)``), which is the pair's frame seen from arm 2 because
+    arm 2 faces arm 1 along x.
+    """
+    if name not in SWAPPED_PAIRS:
+        if name not in PAIRS and name not in CONDITIONED_PAIRS:
+            raise UnknownNameError(
+                "arm-pair system", name, [*PAIRS, *CONDITIONED_PAIRS, *SWAPPED_PAIRS]
+            )
+        return pair_cell(name)
+    pair = SWAPPED_PAIRS[name]
+    cell, a, b = pair_cell(pair)
+    if pair in CONDITIONED_PAIRS:
+        facing = Pose((0.0, 0.0, 0.0), (0.0, 0.0, math.pi))
+        arm_a, arm_b = cell.arm(a), cell.arm(b)
+        cell = Cell(
+            name,
+            (
+                ArmSpec(arm_a.arm_id, arm_a.robot, facing),
+                ArmSpec(arm_b.arm_id, arm_b.robot, Pose()),
+            ),
+        )
+    return cell, b, a
 
 
 def sampling_box(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:

@@ -242,21 +242,44 @@ def load_distance_file(path: Path, expect_pair: str | None = None) -> PairDistan
     return model
 
 
+def distance_model_path(pair: str) -> Path:
+    """Where the distance model of ``pair`` lives: ``models/distance_<pair>.safetensors`` (what
+    ``nehmo distance train`` and ``calibrate`` write unless given another path)."""
+    return MODELS_DIR / f"distance_{pair}.safetensors"
+
+
+OPTIONAL_DISTANCE_MODELS = ("ur5_kinova_any",)
+"""Pairs whose code path exists but whose weights this repository does not ship: once
+``nehmo distance train --pair <pair>`` has written ``models/distance_<pair>.safetensors`` (and its
+card), :func:`load_distance_model` loads it and it counts as shipped."""
 SHIPPED_DISTANCE_MODELS = (
     "ur5_ur5",
     "ur5_ur5_diag",
     "ur5_ur5_opposite",
     "ur5_kinova",
     "ur5_ur5_any",
+    *(p for p in OPTIONAL_DISTANCE_MODELS if distance_model_path(p).exists()),
 )
+"""Pairs whose learned distance is in ``models/`` (the optional ones as found at import)."""
+DISTANCE_MODELS = tuple(dict.fromkeys([*SHIPPED_DISTANCE_MODELS, *OPTIONAL_DISTANCE_MODELS]))
+"""Every pair :func:`load_distance_model` knows by name."""
 
 
 def load_distance_model(pair: str) -> PairDistanceModel:
     """Load a shipped learned distance: ``load_distance_model("ur5_ur5")``.
 
     The returned model has ``distance(q)`` and ``distance_and_gradient(q)`` (numpy, batched)
-    and is a torch module (``model(q)``) for use inside value functions.
+    and is a torch module (``model(q)``) for use inside value functions. A pair of
+    :data:`OPTIONAL_DISTANCE_MODELS` not trained yet raises :class:`ModelFileError` saying how
+    to make it.
     """
-    if pair not in SHIPPED_DISTANCE_MODELS:
-        raise UnknownNameError("distance model", pair, SHIPPED_DISTANCE_MODELS)
-    return load_distance_file(MODELS_DIR / f"distance_{pair}.safetensors", expect_pair=pair)
+    if pair not in DISTANCE_MODELS:
+        raise UnknownNameError("distance model", pair, DISTANCE_MODELS)
+    path = distance_model_path(pair)
+    if pair in OPTIONAL_DISTANCE_MODELS and not path.exists():
+        raise ModelFileError(
+            f"the {pair} distance model is not shipped and not trained yet ({path} is missing): "
+            f"make it with 'nehmo distance generate --pair {pair} ...' and "
+            f"'nehmo distance train --pair {pair} --data ...' (they write {path.name})"
+        )
+    return load_distance_file(path, expect_pair=pair)

@@ -103,11 +103,17 @@ class CellWorld:
         self._q[arm_id] = qv.copy()
 
     def set_base_pose(self, arm_id: str, pose: Pose) -> None:
-        """Move one arm's base to ``pose`` (world frame); the cell keeps its declared pose."""
+        """Move one arm's base link frame (the URDF frame, as the cell declares base poses) to
+        ``pose`` (world frame); the cell keeps its declared pose.
+
+        PyBullet poses a base by its inertial frame, so the base link's local inertial frame is
+        composed on (the Kinova's sits 8.4 cm above its link frame; the UR5's is the link frame).
+        """
+        body = self.body(arm_id)
         quat = pb.getQuaternionFromEuler(pose.rpy)
-        pb.resetBasePositionAndOrientation(
-            self.body(arm_id), pose.xyz, quat, physicsClientId=self.client
-        )
+        local = pb.getDynamicsInfo(body, -1, physicsClientId=self.client)[3:5]
+        com_pos, com_orn = pb.multiplyTransforms(pose.xyz, quat, local[0], local[1])
+        pb.resetBasePositionAndOrientation(body, com_pos, com_orn, physicsClientId=self.client)
 
     def set_configuration(self, q: Mapping[str, ArrayLike]) -> None:
         """Pose several arms at once: ``{arm_id: q}``."""

@@ -118,8 +118,9 @@ def pair_boundary(system: object) -> tuple[PairDistanceModel, int | None]:
     """``(distance, n_first)``: the learned distance behind an arm-pair system's ``l(x)``.
 
     ``n_first`` is None when ``l = distance``, and the controlled arm's joint count when ``l`` is
-    a :class:`~nehmo_core.hjr.systems.arm_pairs.SwappedBoundary` (``l(x) = distance(x₂, x₁)``: the
-    distance's second arm is the system's first). Anything else raises :class:`NehmoError`.
+    a :class:`~nehmo_core.hjr.systems.arm_pairs.SwappedBoundary` (``l(x) = distance(x₂, x₁)``, a
+    conditioned pair's ``r`` last in both: the distance's second arm is the system's first).
+    Anything else raises :class:`NehmoError`.
     """
     name = getattr(system, "name", type(system).__name__)
     if not isinstance(system, ArmPairSystem):
@@ -134,9 +135,12 @@ def pair_boundary(system: object) -> tuple[PairDistanceModel, int | None]:
         return fn, None
     if isinstance(fn, SwappedBoundary) and isinstance(fn.distance, PairDistanceModel):
         inner = fn.distance
-        if not fn.n_first == inner.n2 == system.n1 or inner.n1 != system.n2:
+        # a conditioned distance needs the arms' split given, to keep ``r`` last
+        fits_second = fn.n_second == inner.n1 or (fn.n_second is None and not inner.n_cond)
+        if not fn.n_first == inner.n2 == system.n1 or inner.n1 != system.n2 or not fits_second:
             raise NehmoError(
-                f"swapped boundary of system {name!r} (n_first={fn.n_first}) does not fit its "
+                f"swapped boundary of system {name!r} (n_first={fn.n_first}, "
+                f"n_second={fn.n_second}) does not fit its "
                 f"distance (arms of {inner.n1} and {inner.n2} joints) and the system "
                 f"(n1={system.n1}, n2={system.n2})"
             )

@@ -28,6 +28,7 @@ from nehmo_core.hjr.train_settings import Schedule, TrainSettings
 __all__ = [
     "CHECKPOINT",
     "MODEL",
+    "OPTIONAL_VALUE_FUNCTIONS",
     "SHIPPED_VALUE_FUNCTIONS",
     "load_value_function",
     "shipped_value_path",
@@ -124,6 +125,21 @@ def _strip_prefix(tensors: dict[str, Tensor], prefix: str) -> dict[str, Tensor]:
     return {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
 
 
+MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
+
+
+def _value_file(name: str, variant: str) -> Path:
+    return MODELS_DIR / f"value_{name}_{variant.replace('+', '_')}.safetensors"
+
+
+OPTIONAL_VALUE_FUNCTIONS: dict[str, tuple[str, ...]] = {
+    "ur5_kinova_any": ("bc+sym",),
+    "kinova_ur5_any": ("bc+sym",),
+}
+"""Value functions (system: variants) whose code path exists but whose weights this repository
+does not ship: a variant counts as shipped once its files (``model.safetensors`` and
+``model.json`` of a ``nehmo train`` run, copied to :func:`shipped_value_path`) are in
+``models/``. The pose-conditioned UR5-Kinova pair, from either arm's side."""
 SHIPPED_VALUE_FUNCTIONS: dict[str, tuple[str, ...]] = {
     "ur5_ur5": ("bc+sym", "bc", "deepreach"),
     "ur5_ur5_diag": ("bc+sym",),
@@ -131,19 +147,27 @@ SHIPPED_VALUE_FUNCTIONS: dict[str, tuple[str, ...]] = {
     "ur5_kinova": ("bc+sym",),
     "kinova_ur5": ("bc+sym",),
     "ur5_ur5_any": ("bc+sym",),
+    **{
+        name: present
+        for name, variants in OPTIONAL_VALUE_FUNCTIONS.items()
+        if (present := tuple(v for v in variants if _value_file(name, v).exists()))
+    },
 }
+"""Value functions in ``models/`` (system: variants; the optional ones as found at import)."""
 
 
 def shipped_value_path(name: str, variant: str = "bc+sym") -> Path:
-    """File of a shipped value function: ``models/value_<pair>_<variant>.safetensors``."""
-    if name not in SHIPPED_VALUE_FUNCTIONS:
-        raise UnknownNameError("shipped value function", name, SHIPPED_VALUE_FUNCTIONS)
-    if variant not in SHIPPED_VALUE_FUNCTIONS[name]:
-        raise UnknownNameError(
-            f"variant shipped for {name}", variant, SHIPPED_VALUE_FUNCTIONS[name]
-        )
-    slug = variant.replace("+", "_")
-    return Path(__file__).resolve().parents[1] / "models" / f"value_{name}_{slug}.safetensors"
+    """File of a shipped value function: ``models/value_<pair>_<variant>.safetensors``.
+
+    Also the place of an optional one (:data:`OPTIONAL_VALUE_FUNCTIONS`) not trained yet.
+    """
+    known = {**OPTIONAL_VALUE_FUNCTIONS, **SHIPPED_VALUE_FUNCTIONS}
+    if name not in known:
+        raise UnknownNameError("shipped value function", name, known)
+    variants = tuple(dict.fromkeys([*known[name], *OPTIONAL_VALUE_FUNCTIONS.get(name, ())]))
+    if variant not in variants:
+        raise UnknownNameError(f"variant shipped for {name}", variant, variants)
+    return _value_file(name, variant)
 
 
 def load_value_function(
@@ -158,6 +182,16 @@ def load_value_function(
     """
     if isinstance(path, str) and path in SHIPPED_VALUE_FUNCTIONS:
         path = shipped_value_path(path, variant or "bc+sym")
+    elif isinstance(path, str) and path in OPTIONAL_VALUE_FUNCTIONS:
+        file = shipped_value_path(path, variant or "bc+sym")
+        if not file.exists():
+            raise ModelFileError(
+                f"the {variant or 'bc+sym'} value function of {path!r} is not shipped and not "
+                f"trained yet ({file} is missing): train it with 'nehmo train --system {path} "
+                f"--variant {variant or 'bc+sym'} --out RUN' and copy RUN/model.safetensors and "
+                f"RUN/model.json to {file.name} and {file.with_suffix('.json').name} there"
+            )
+        path = file
     elif isinstance(path, str) and "/" not in path and not Path(path).exists():
         raise UnknownNameError("shipped value function", path, SHIPPED_VALUE_FUNCTIONS)
     elif variant is not None:

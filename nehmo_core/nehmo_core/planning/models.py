@@ -20,6 +20,10 @@ given as ``[KIND=]SOURCE``:
   model whose base distance matches (:func:`~nehmo_core.planning.pair_frame.match_pair`).
   A UR5 pair at any other base distance within its range uses ``ur5_ur5_any``, the value
   function conditioned on the base distance (loaded only when some pair of the cell needs it).
+  A UR5 and a Kinova at another base distance likewise use ``ur5_kinova_any`` (the UR5's side)
+  and ``kinova_ur5_any`` (the Kinova's side) once those are trained and in ``models/``
+  (:data:`~nehmo_core.hjr.model_files.OPTIONAL_VALUE_FUNCTIONS`); until then such a pair is
+  reported as unmodelled, as any pair no model fits.
 
 """
 
@@ -35,7 +39,11 @@ from typing import Any
 import casadi as ca
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError
-from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS, load_value_function
+from nehmo_core.hjr.model_files import (
+    OPTIONAL_VALUE_FUNCTIONS,
+    SHIPPED_VALUE_FUNCTIONS,
+    load_value_function,
+)
 from nehmo_core.planning.pair_frame import (
     ModelGeometry,
     inverse_pose,
@@ -76,12 +84,13 @@ _SYNTHETIC_PAIRS = {("ur5", "ur5"): "ur5_ur5", ("ur5", "kinova_gen3_6dof"): "ur5
 """(controlled robot, other robot) → pair with a synthetic stand-in (a learned-distance cell)."""
 SHIPPED_PAIRS: dict[tuple[str, str], tuple[str, ...]] = {
     ("ur5", "ur5"): ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite", "ur5_ur5_any"),
-    ("ur5", "kinova_gen3_6dof"): ("ur5_kinova",),
-    ("kinova_gen3_6dof", "ur5"): ("kinova_ur5",),
+    ("ur5", "kinova_gen3_6dof"): ("ur5_kinova", "ur5_kinova_any"),
+    ("kinova_gen3_6dof", "ur5"): ("kinova_ur5", "kinova_ur5_any"),
 }
 """(controlled robot, other robot) → the shipped value functions of that game, one per base
-distance. The first is required for every Opt kind; the others serve the kinds whose variant
-they ship (a peer at their distance is otherwise reported as unconstrained)."""
+distance (``*_any``: any distance in its range, after the fixed ones). The first is required for
+every Opt kind; the others serve the kinds whose variant they ship, when their files are present
+(a peer at their distance is otherwise reported as unconstrained)."""
 
 
 @dataclass(frozen=True)
@@ -131,7 +140,8 @@ def snapshot_value_models(
     """
     out = []
     for s in sources:
-        if s.source == SYNTHETIC or s.source in SHIPPED_VALUE_FUNCTIONS:
+        named = s.source in SHIPPED_VALUE_FUNCTIONS or s.source in OPTIONAL_VALUE_FUNCTIONS
+        if s.source == SYNTHETIC or named:
             out.append(s)
             continue
         src = _weights_file(Path(s.source))
@@ -215,7 +225,8 @@ class ModelRegistry:
             out.extend(
                 name
                 for i, name in enumerate(names)
-                if i == 0 or (variant in SHIPPED_VALUE_FUNCTIONS[name] and _cell_uses(name, cell))
+                if i == 0
+                or (variant in SHIPPED_VALUE_FUNCTIONS.get(name, ()) and _cell_uses(name, cell))
             )
         return out
 
@@ -242,7 +253,7 @@ class ModelRegistry:
         slug = variant.replace("+", "_")
         if source == SYNTHETIC:
             return self._synthetic(variant, pairs)
-        if source in SHIPPED_VALUE_FUNCTIONS:
+        if source in SHIPPED_VALUE_FUNCTIONS or source in OPTIONAL_VALUE_FUNCTIONS:
             try:
                 vf = load_value_function(source, variant=variant)
             except (ModelFileError, NehmoError, FileNotFoundError) as exc:
@@ -290,13 +301,19 @@ class ModelRegistry:
 
 def pair_geometry(pair: str) -> ModelGeometry:
     """``(robot 1, robot 2, base of arm 2 in arm 1's frame[, base-distance range])`` of a
-    named arm pair: what :func:`~nehmo_core.planning.pair_frame.match_pair` takes per model."""
-    from nehmo_core.geometry.distance_data import BASE_RANGE, CONDITIONED_PAIRS, pair_cell
+    named arm pair (or a swapped one, ``kinova_ur5``, ``kinova_ur5_any``): what
+    :func:`~nehmo_core.planning.pair_frame.match_pair` takes per model."""
+    from nehmo_core.geometry.distance_data import (
+        BASE_RANGE,
+        CONDITIONED_PAIRS,
+        SWAPPED_PAIRS,
+        system_pair_cell,
+    )
 
-    model_cell, a, b = pair_cell(pair)
+    model_cell, a, b = system_pair_cell(pair)
     arm1, arm2 = model_cell.arm(a), model_cell.arm(b)
     base2 = pose_from_matrix(relative_pose(arm1.base, arm2.base))
-    if pair in CONDITIONED_PAIRS:
+    if SWAPPED_PAIRS.get(pair, pair) in CONDITIONED_PAIRS:
         return arm1.robot.name, arm2.robot.name, base2, BASE_RANGE
     return arm1.robot.name, arm2.robot.name, base2
 

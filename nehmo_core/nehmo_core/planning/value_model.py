@@ -67,7 +67,11 @@ class PairValueModel:
         """Export ``value_function`` (an arm-pair system with a learned-distance boundary).
 
         The pair geometry comes from the distance: as trained for a plain distance; with the
-        robots exchanged and the inverse base offset for a swapped one (``kinova_ur5``).
+        robots exchanged and the inverse base offset for a swapped one (``kinova_ur5``). A
+        swapped conditioned one (``kinova_ur5_any``) keeps the base-distance range: seen from
+        arm 2, arm 1 stands at ``inverse(base2)`` moved by ``(r, 0, 0)`` when ``base2`` turns
+        arm 2 to face arm 1 along x (its rotation sends x to −x), which every conditioned pair
+        does (:data:`~nehmo_core.geometry.distance_data.CONDITIONED_PAIRS`).
         """
         system = value_function.system
         try:
@@ -82,9 +86,12 @@ class PairValueModel:
         base_range = cfg.base2_range
         if n_first is None:
             robots, base, dofs = (cfg.robot1, cfg.robot2), base2, (distance.n1, distance.n2)
-        elif base_range is not None:
+        elif base_range is not None and not _faces_back_along_x(base2):
+            # (T_b·base2)⁻¹ = base2⁻¹·T_(−b) is T_b·base2⁻¹ for every shift b along x only then
             raise NehmoError(
-                f"value function {name!r}: a swapped conditioned pair is not supported"
+                f"value function {name!r}: a swapped conditioned pair needs arm 2 of its "
+                f"distance turned to face arm 1 along x (base2 rpy {cfg.base2_rpy} does not "
+                "send x to −x), or its base distance would not shift along x seen from arm 2"
             )
         else:
             robots, base = (cfg.robot2, cfg.robot1), inverse_pose(base2)
@@ -139,6 +146,11 @@ class PairValueModel:
             fn = self.value_grad if k == 1 else self.value_grad.map(k)
             call = self._calls[k] = _BufferedCall(fn, k, self.state_dim)
         return call(tau, x, own_step)
+
+
+def _faces_back_along_x(pose: Pose) -> bool:
+    """Whether ``pose``'s rotation sends the x axis to −x (arm 2 facing arm 1 along x)."""
+    return bool(np.allclose(pose.matrix()[:3, 0], (-1.0, 0.0, 0.0), atol=1e-9))
 
 
 class _BufferedCall:

@@ -15,7 +15,12 @@ import pybullet as pb
 import torch
 
 from nehmo_core.errors import NehmoError
-from nehmo_core.geometry.distance_data import CONDITIONED_PAIRS, PAIRS, pair_cell
+from nehmo_core.geometry.distance_data import (
+    CONDITIONED_PAIRS,
+    PAIRS,
+    SWAPPED_PAIRS,
+    system_pair_cell,
+)
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
@@ -29,12 +34,12 @@ reported as ``cutoff``."""
 def pair_arms(name: str) -> tuple[Cell, str, str]:
     """The cell of a shipped pair system and its arms in the system's order (arm 1, arm 2).
 
-    ``kinova_ur5`` is the UR5-Kinova cell seen from the Kinova's base: the arms swap.
+    ``kinova_ur5`` is the UR5-Kinova cell seen from the Kinova's base: the arms swap; so do
+    they in ``kinova_ur5_any``, whose cell has the Kinova at the origin and the UR5 facing it
+    (moved to ``(r, 0, 0)`` per state). See
+    :func:`~nehmo_core.geometry.distance_data.system_pair_cell`.
     """
-    if name == "kinova_ur5":
-        cell, a, b = pair_cell("ur5_kinova")
-        return cell, b, a
-    return pair_cell(name)
+    return system_pair_cell(name)
 
 
 def _matrix(position: tuple[float, ...], quaternion: tuple[float, ...]) -> np.ndarray:
@@ -45,7 +50,8 @@ def _matrix(position: tuple[float, ...], quaternion: tuple[float, ...]) -> np.nd
 
 
 def inertial_offset(world: CellWorld, arm_id: str) -> np.ndarray:
-    """The base link's inertial frame in its link frame (4, 4): PyBullet poses bases by it."""
+    """The base link's inertial frame in its link frame (4, 4): PyBullet reports bases by it
+    (:meth:`~nehmo_core.geometry.pybullet_world.CellWorld.set_base_pose` composes it on)."""
     local = pb.getDynamicsInfo(world.body(arm_id), -1, physicsClientId=world.client)[3:5]
     return _matrix(local[0], local[1])
 
@@ -169,9 +175,8 @@ class PairDistance:
         x = np.asarray(x, dtype=np.float64)
         n1, n2, batch = self.n1, self.n2, x.shape[0]
         base_a = np.broadcast_to(self._fixed[0], (batch, 4, 4))
-        if self.conditioned:  # as _place poses it: PyBullet sets the base's inertial frame
+        if self.conditioned:  # as _place poses it: the base link frame at (r, 0, 0), facing
             placed = Pose((0.0, 0.0, 0.0), (0.0, 0.0, math.pi)).matrix()
-            placed = placed @ np.linalg.inv(inertial_offset(self.world, self.arm_b))
             base_b = np.repeat(placed[None], batch, axis=0)
             base_b[:, 0, 3] += x[:, n1 + n2]
         else:
@@ -203,7 +208,7 @@ class AnalyticBoundary:
 
 def exact_margin(system: HJISystem) -> PairDistance | AnalyticBoundary:
     """The exact margin of a system: PyBullet for shipped arm pairs, ``l`` otherwise."""
-    shipped = (*PAIRS, *CONDITIONED_PAIRS, "kinova_ur5")
+    shipped = (*PAIRS, *CONDITIONED_PAIRS, *SWAPPED_PAIRS)
     if isinstance(system, ArmPairSystem) and system.name in shipped:
         return PairDistance(system)
     return AnalyticBoundary(system)

@@ -23,9 +23,13 @@ ARM_PAIR_NAMES = (
     "ur5_kinova",
     "kinova_ur5",
     "ur5_ur5_any",
+    "ur5_kinova_any",
+    "kinova_ur5_any",
 )
-"""The shipped arm pairs, built by :func:`.arm_pairs.make_arm_pair_system` (``*_any``: conditioned
-on the base distance, for any layout)."""
+"""The arm pairs built by :func:`.arm_pairs.make_arm_pair_system` (``*_any``: conditioned on the
+base distance, for any layout). Building one loads its learned distance, which for
+``ur5_kinova_any`` / ``kinova_ur5_any`` must be trained first (``nehmo distance train --pair
+ur5_kinova_any``): until then they raise :class:`~nehmo_core.errors.ModelFileError`."""
 
 
 def _arm_pair_factory(pair: str) -> Callable[[], HJISystem]:
