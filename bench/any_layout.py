@@ -1,4 +1,7 @@
-"""The pose-conditioned UR5 pair models against PyBullet and against the fixed-distance models.
+"""The pose-conditioned pair models against PyBullet and against the fixed-distance models.
+
+``--pair ur5_ur5_any`` (the default) or ``--pair ur5_kinova_any`` (with its Kinova-side value
+function ``kinova_ur5_any``, compared with ``ur5_kinova`` / ``kinova_ur5`` at 0.6 m):
 
 1. Distance ``distance_ur5_ur5_any`` on a fresh labelled set (``nehmo distance generate --pair
    ur5_ur5_any --seed 1001``: random base distances in the training range and random base yaws,
@@ -8,9 +11,11 @@
    distances (0.6 / 0.849 / 1.2 m): on uniform joint states, the mean |ΔV| and the share where
    the two disagree on the sign of ``V − ε`` (ε = 0.05 m), at τ = 0.1, 0.3 and 0.6 s.
 
-Writes ``bench/results/any_layout.{json,md}``.
+Writes ``bench/results/any_layout.{json,md}`` (``any_layout_ur5_kinova.{json,md}`` for the
+UR5-Kinova pair).
 
     ./run python bench/any_layout.py --test runs/distance_any/test.npz
+    ./run python bench/any_layout.py --pair ur5_kinova_any --test data/ur5_kinova_any_test.npz
 """
 
 from __future__ import annotations
@@ -29,14 +34,21 @@ from nehmo_core.hjr.model_files import load_value_function, shipped_value_path
 
 ROOT = Path(__file__).resolve().parents[1]
 BANDS = ((0.25, 0.5), (0.5, 0.8), (0.8, 1.1), (1.1, 1.4), (1.4, 1.7))
-FIXED = {"ur5_ur5": 0.6, "ur5_ur5_diag": 0.6 * 2**0.5, "ur5_ur5_opposite": 1.2}
+#: conditioned value function → the fixed-distance ones it must agree with, at their distance
+FIXED = {
+    "ur5_ur5_any": {"ur5_ur5": 0.6, "ur5_ur5_diag": 0.6 * 2**0.5, "ur5_ur5_opposite": 1.2},
+    "ur5_kinova_any": {"ur5_kinova": 0.6},
+    "kinova_ur5_any": {"kinova_ur5": 0.6},
+}
+#: distance pair → its conditioned value functions
+VALUES = {"ur5_ur5_any": ("ur5_ur5_any",), "ur5_kinova_any": ("ur5_kinova_any", "kinova_ur5_any")}
 TAUS = (0.1, 0.3, 0.6)
 EPSILON = 0.05
 
 
-def distance_bands(test: Path) -> list[dict[str, Any]]:
+def distance_bands(pair: str, test: Path) -> list[dict[str, Any]]:
     q, d, _ = load_dataset(test)
-    pred = load_distance_model("ur5_ur5_any").distance(q)
+    pred = load_distance_model(pair).distance(q)
     rows = []
     for low, high in (*BANDS, (BANDS[0][0], BANDS[-1][1])):
         band = (q[:, 12] >= low) & (q[:, 12] < high if high < BANDS[-1][1] else q[:, 12] <= high)
@@ -56,36 +68,38 @@ def distance_bands(test: Path) -> list[dict[str, Any]]:
     return rows
 
 
-def value_agreement(samples: int, seed: int) -> list[dict[str, Any]]:
-    conditioned = load_value_function(shipped_value_path("ur5_ur5_any"))
+def value_agreement(pair: str, samples: int, seed: int) -> list[dict[str, Any]]:
     rng = np.random.default_rng(seed)
     q = rng.uniform(-np.pi, np.pi, (samples, 12))
     rows = []
-    for name, r in FIXED.items():
-        fixed = load_value_function(shipped_value_path(name))
-        x = np.c_[q, np.full(samples, r)]
-        for tau in TAUS:
-            t = np.full(samples, tau)
-            v_any, v_fix = conditioned.value(t, x), fixed.value(t, q)
-            rows.append(
-                {
-                    "fixed_model": name,
-                    "r_m": r,
-                    "tau_s": tau,
-                    "states": samples,
-                    "mean_abs_diff_m": float(np.mean(np.abs(v_any - v_fix))),
-                    "sign_disagreement": float(np.mean((v_any > EPSILON) != (v_fix > EPSILON))),
-                    "conditioned_safe_fixed_not": float(
-                        np.mean((v_any > EPSILON) & (v_fix <= EPSILON))
-                    ),
-                }
-            )
+    for name in VALUES[pair]:
+        conditioned = load_value_function(shipped_value_path(name))
+        for fixed_name, r in FIXED[name].items():
+            fixed = load_value_function(shipped_value_path(fixed_name))
+            x = np.c_[q, np.full(samples, r)]
+            for tau in TAUS:
+                t = np.full(samples, tau)
+                v_any, v_fix = conditioned.value(t, x), fixed.value(t, q)
+                rows.append(
+                    {
+                        "conditioned_model": name,
+                        "fixed_model": fixed_name,
+                        "r_m": r,
+                        "tau_s": tau,
+                        "states": samples,
+                        "mean_abs_diff_m": float(np.mean(np.abs(v_any - v_fix))),
+                        "sign_disagreement": float(np.mean((v_any > EPSILON) != (v_fix > EPSILON))),
+                        "conditioned_safe_fixed_not": float(
+                            np.mean((v_any > EPSILON) & (v_fix <= EPSILON))
+                        ),
+                    }
+                )
     return rows
 
 
 def markdown(result: dict[str, object]) -> str:
     lines = [
-        "### Pose-conditioned distance vs PyBullet (fresh poses, seed 1001)",
+        f"### Pose-conditioned distance `{result['pair']}` vs PyBullet (fresh poses, seed 1001)",
         "",
         "| base distance m | states | colliding | false-safe % | near contact | mean err near mm "
         "| p95 err near mm |",
@@ -107,13 +121,14 @@ def markdown(result: dict[str, object]) -> str:
         "",
         f"### Conditioned value vs the fixed-distance value functions ({EPSILON} m level)",
         "",
-        "| fixed model | r m | τ s | mean abs ΔV mm | sign disagreement % "
+        "| conditioned model | fixed model | r m | τ s | mean abs ΔV mm | sign disagreement % "
         "| conditioned safe, fixed not % |",
-        "|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|",
     ]
     for v in result["value"]:  # type: ignore[attr-defined]
         lines.append(
-            f"| {v['fixed_model']} | {v['r_m']:.3f} | {v['tau_s']} "
+            f"| {v.get('conditioned_model', 'ur5_ur5_any')} | {v['fixed_model']} "
+            f"| {v['r_m']:.3f} | {v['tau_s']} "
             f"| {1000 * v['mean_abs_diff_m']:.1f} "
             f"| {100 * v['sign_disagreement']:.2f} | {100 * v['conditioned_safe_fixed_not']:.2f} |"
         )
@@ -122,6 +137,7 @@ def markdown(result: dict[str, object]) -> str:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pair", default="ur5_ur5_any", choices=sorted(VALUES))
     parser.add_argument("--test", type=Path, required=True, help="labelled .npz (fresh seed)")
     parser.add_argument("--samples", type=int, default=20000)
     parser.add_argument("--seed", type=int, default=7)
@@ -129,13 +145,15 @@ def main() -> int:
     args = parser.parse_args()
     result = {
         "command": " ".join(["bench/any_layout.py", *sys.argv[1:]]),
-        "distance": distance_bands(args.test),
-        "value": value_agreement(args.samples, args.seed),
+        "pair": args.pair,
+        "distance": distance_bands(args.pair, args.test),
+        "value": value_agreement(args.pair, args.samples, args.seed),
         "value_seed": args.seed,
     }
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "any_layout.json").write_text(json.dumps(result, indent=1) + "\n")
-    (args.out / "any_layout.md").write_text(markdown(result))
+    stem = "any_layout" if args.pair == "ur5_ur5_any" else "any_layout_ur5_kinova"
+    (args.out / f"{stem}.json").write_text(json.dumps(result, indent=1) + "\n")
+    (args.out / f"{stem}.md").write_text(markdown(result))
     print(markdown(result))
     return 0
 
