@@ -1,6 +1,6 @@
 """Why NeHMO episodes end stuck: each stuck episode of the fresh tables, sorted by what held it.
 
-    ./run python bench/stuck_reasons.py --seeds 34,35   # bench/results/stuck_reasons.{json,md}
+    ./run python bench/stuck_reasons.py --seeds 39,40   # bench/results/stuck_reasons.{json,md}
 
 Read from the episode logs of the ``nehmo`` rows (``bench/results/fresh/seed<S>/``; the logs are
 where those runs wrote them). For each stuck episode, with exact PyBullet distances:
@@ -62,7 +62,7 @@ def reason(path: str, world: CellWorld | None) -> tuple[str, CellWorld]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", default="34,35")
+    parser.add_argument("--seeds", default="39,40")
     args = parser.parse_args()
     out: dict[str, dict[str, dict[str, int]]] = {}
     lines = [
