@@ -7,7 +7,10 @@ joint box, and the pair states visited by the ``nehmo`` planner in evaluation ep
 development seed 31 (``--episodes-dir``; made by ``nehmo evaluate --planners nehmo --seed 31``
 for dual_ur5, five_ur5 and ur5_kinova_challenging, 20 episodes each) and, for the pose-conditioned
 ``ur5_ur5_any``, the ``nehmo`` episodes of Ha et al.'s task files (``ha_tasks``: ``nehmo evaluate
---tasks ../shared/ha_benchmark/tasks --planners nehmo``), whose layouts span r = 0.31-1.60 m.
+--tasks ../shared/ha_benchmark/tasks --planners nehmo``), whose layouts span r = 0.31-1.60 m;
+for ``ur5_kinova_any`` / ``kinova_ur5_any``, the ``nehmo`` episodes of the UR5-Kinova cell planned
+with them alone (``ur5_kinova_any``: ``nehmo evaluate --setup ur5_kinova_challenging --planners
+nehmo --seed 31 --value-model ur5_kinova_any --value-model kinova_ur5_any``).
 Writes one JSON + Markdown per certificate under ``bench/results/certificates/`` and a table
 ``certificates.md``; ``--missing`` skips certificates whose JSON is already there (a resumed run).
 
@@ -36,6 +39,8 @@ MODELS = [  # (pair, variant, episode setups whose logs hold its pair states)
     ("ur5_ur5", "bc", ("dual_ur5", "five_ur5")),
     ("ur5_ur5", "deepreach", ("dual_ur5", "five_ur5")),
     ("ur5_ur5_any", "bc+sym", ("ha_tasks",)),
+    ("ur5_kinova_any", "bc+sym", ("ur5_kinova_any",)),
+    ("kinova_ur5_any", "bc+sym", ("ur5_kinova_any",)),
 ]
 TAUS = (0.3, 0.1)
 _DEFAULTS = PlannerSettings()
