@@ -10,7 +10,8 @@ for dual_ur5, five_ur5 and ur5_kinova_challenging, 20 episodes each) and, for th
 --tasks ../shared/ha_benchmark/tasks --planners nehmo``), whose layouts span r = 0.31-1.60 m;
 for ``ur5_kinova_any`` / ``kinova_ur5_any``, the ``nehmo`` episodes of the UR5-Kinova cell planned
 with them alone (``ur5_kinova_any``: ``nehmo evaluate --setup ur5_kinova_challenging --planners
-nehmo --seed 31 --value-model ur5_kinova_any --value-model kinova_ur5_any``).
+nehmo --seed 0 --value-model ur5_kinova_any --value-model kinova_ur5_any``, the Table IV comparison
+of ``bench/results/any_layout_ur5_kinova.md``).
 Writes one JSON + Markdown per certificate under ``bench/results/certificates/`` and a table
 ``certificates.md``; ``--missing`` skips certificates whose JSON is already there (a resumed run).
 
