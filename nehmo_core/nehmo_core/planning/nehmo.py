@@ -220,15 +220,9 @@ class NehmoPlanner(StallEscape):
         if not ids:
             return False
         slow = self._evaluate_current(q, peers, ids, dict.fromkeys(ids, s.hold_bound))
-        floor = np.array(
-            [
-                0.5 * self.group_margin(self.pairs[p].model_index, s.hold_bound)
-                if p in participants
-                else s.epsilon
-                for p in ids
-            ]
-        )
-        return bool(np.any(slow.values < floor))
+        half = [0.5 * self.group_margin(self.pairs[p].model_index, s.hold_bound) for p in ids]
+        floor = [h if p in participants else s.epsilon for p, h in zip(ids, half, strict=True)]
+        return bool(np.any(slow.values < np.array(floor)))
 
     @property
     def announcement(self) -> float:
