@@ -44,6 +44,8 @@ MODELS = {  # pair -> episode setups whose logs hold its pair states
     "ur5_kinova": ("ur5_kinova_challenging",),
     "kinova_ur5": ("ur5_kinova_challenging",),
     "ur5_ur5_any": ("ha_tasks",),
+    "ur5_kinova_any": ("ur5_kinova_any",),
+    "kinova_ur5_any": ("ur5_kinova_any",),
 }
 BANDS = ((0.0, 0.1), (0.05, 0.15), (0.1, 0.2))
 ALPHA, BETA = 0.01, 1e-3

@@ -117,16 +117,20 @@ def test_conditioned_casadi_graph_matches_torch() -> None:
         assert np.abs(np.asarray(g).ravel() - gt.numpy().ravel()).max() < 1e-9
 
 
-def test_conditioned_labels_are_the_real_layouts_distances() -> None:
-    """Labels drawn at random base yaws equal the fixed dual-UR5 cell's at r = 0.6 up to the
-    base links' own shapes (the joint-1 shift turns everything above them exactly)."""
+@pytest.mark.parametrize(("fixed_pair", "tolerance"), [("ur5_ur5", 0.005), ("ur5_kinova", 0.003)])
+def test_conditioned_labels_are_the_real_layouts_distances(
+    fixed_pair: str, tolerance: float
+) -> None:
+    """Labels drawn at random base yaws equal the fixed 0.6 m cell's (dual UR5, UR5-Kinova) at
+    r = 0.6 up to the base links' own shapes (the joint-1 shift turns everything above them
+    exactly). Posed by its inertial frame, the Kinova stood 8.4 cm low (19 mm near contact)."""
     rng = np.random.default_rng(4)
-    q = dd.uniform_samples("ur5_ur5", 400, rng)
-    fixed = dd.exact_distances("ur5_ur5", q)
-    conditioned = dd.labelled("ur5_ur5_any", np.c_[q, np.full(len(q), 0.6)], rng)
+    q = dd.uniform_samples(fixed_pair, 400, rng)
+    fixed = dd.exact_distances(fixed_pair, q)
+    conditioned = dd.labelled(f"{fixed_pair}_any", np.c_[q, np.full(len(q), 0.6)], rng)
     near = np.abs(fixed) < 0.1
-    assert near.sum() > 40
-    assert np.mean(np.abs(conditioned - fixed)[near]) < 0.005
+    assert near.sum() > 30
+    assert np.mean(np.abs(conditioned - fixed)[near]) < tolerance
     assert np.median(np.abs(conditioned - fixed)) < 1e-3
 
 
