@@ -154,7 +154,8 @@ def main() -> int:
         "out for t_safe with exact PyBullet geometry: the learned safe control against the "
         "adversaries of `nehmo verify` (learned worst case, pursuit, two box corners, switching "
         f"corners). Bound: Clopper-Pearson at confidence {1 - BETA:g}; target α = {ALPHA:.0%}. "
-        f"Visited: `nehmo` episodes of seed 31 (of seed 0, Table IV, for the conditioned UR5-Kinova models). Sampling seed {args.seed}. "
+        "Visited: `nehmo` episodes of seed 31 (of seed 0, Table IV, for the conditioned "
+        f"UR5-Kinova models). Sampling seed {args.seed}. "
         "`bench/falsification.py`.",
         "",
         "| model | distribution | ε [m] | states | contacts | rate | bound | ≤ α | adversaries |",
