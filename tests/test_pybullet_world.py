@@ -86,17 +86,16 @@ def test_set_base_pose_places_the_base_link_frame(arm_id: str) -> None:
     """PyBullet poses a base by its inertial frame (the Kinova's sits 8.4 cm above its link
     frame): set_base_pose must put the URDF link frame where asked, as the loaded cell does."""
     from nehmo_core.robots.model import Pose
-    from nehmo_core.verify.truth import base_link_frame
 
     with CellWorld(load_cell("ur5_kinova")) as world:
         declared = world.cell.arm(arm_id).base
-        np.testing.assert_allclose(base_link_frame(world, arm_id), declared.matrix(), atol=1e-6)
+        np.testing.assert_allclose(world.base_link_frame(arm_id), declared.matrix(), atol=1e-6)
         for pose in (
             Pose((0.37, -0.2, 0.0), (0.0, 0.0, math.pi)),
             Pose((1.1, 0.4, 0.05), (0.0, 0.0, -0.8)),
         ):
             world.set_base_pose(arm_id, pose)
-            np.testing.assert_allclose(base_link_frame(world, arm_id), pose.matrix(), atol=1e-6)
+            np.testing.assert_allclose(world.base_link_frame(arm_id), pose.matrix(), atol=1e-6)
             origin = world.link_world_positions(arm_id)["base_link"]
             np.testing.assert_allclose(origin, pose.xyz, atol=1e-6)
         # the same pose as declared gives the same distance as the loaded cell

@@ -102,18 +102,34 @@ class CellWorld:
             pb.resetJointState(body, j, float(v), physicsClientId=self.client)
         self._q[arm_id] = qv.copy()
 
+    def _inertial(self, body: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """The base link's inertial frame in its link frame: PyBullet poses bases by it (the
+        Kinova's sits 8.4 cm above its link frame; the UR5's is the link frame)."""
+        local = pb.getDynamicsInfo(body, -1, physicsClientId=self.client)[3:5]
+        return local[0], local[1]
+
     def set_base_pose(self, arm_id: str, pose: Pose) -> None:
         """Move one arm's base link frame (the URDF frame, as the cell declares base poses) to
-        ``pose`` (world frame); the cell keeps its declared pose.
-
-        PyBullet poses a base by its inertial frame, so the base link's local inertial frame is
-        composed on (the Kinova's sits 8.4 cm above its link frame; the UR5's is the link frame).
-        """
+        ``pose`` (world frame); the cell keeps its declared pose."""
         body = self.body(arm_id)
         quat = pb.getQuaternionFromEuler(pose.rpy)
-        local = pb.getDynamicsInfo(body, -1, physicsClientId=self.client)[3:5]
-        com_pos, com_orn = pb.multiplyTransforms(pose.xyz, quat, local[0], local[1])
+        com_pos, com_orn = pb.multiplyTransforms(pose.xyz, quat, *self._inertial(body))
         pb.resetBasePositionAndOrientation(body, com_pos, com_orn, physicsClientId=self.client)
+
+    def base_link_frame(self, arm_id: str) -> np.ndarray:
+        """Where the arm's base link frame (URDF frame) is now in the world (4, 4)."""
+        body = self.body(arm_id)
+        com_pos, com_orn = pb.getBasePositionAndOrientation(body, physicsClientId=self.client)
+        inverse = pb.invertTransform(*self._inertial(body))
+        pos, orn = pb.multiplyTransforms(com_pos, com_orn, *inverse)
+        T = np.eye(4)
+        T[:3, :3] = np.reshape(pb.getMatrixFromQuaternion(orn), (3, 3))
+        T[:3, 3] = pos
+        return T
+
+    def links(self, arm_id: str) -> dict[str, int]:
+        """PyBullet link index of each of the arm's links by name (the base: -1)."""
+        return dict(self._link_index[self.cell.arm(arm_id).arm_id])
 
     def set_configuration(self, q: Mapping[str, ArrayLike]) -> None:
         """Pose several arms at once: ``{arm_id: q}``."""
@@ -128,14 +144,8 @@ class CellWorld:
         body = self.body(arm_id)
         out = {}
         for name, idx in self._link_index[arm_id].items():
-            if idx < 0:
-                # PyBullet reports the base's inertial frame; undo its local inertial offset.
-                com_pos, com_orn = pb.getBasePositionAndOrientation(
-                    body, physicsClientId=self.client
-                )
-                local = pb.getDynamicsInfo(body, -1, physicsClientId=self.client)[3:5]
-                inv_pos, inv_orn = pb.invertTransform(local[0], local[1])
-                pos = pb.multiplyTransforms(com_pos, com_orn, inv_pos, inv_orn)[0]
+            if idx < 0:  # PyBullet reports the base's inertial frame
+                pos = self.base_link_frame(arm_id)[:3, 3]
             else:
                 st = pb.getLinkState(
                     body, idx, computeForwardKinematics=True, physicsClientId=self.client

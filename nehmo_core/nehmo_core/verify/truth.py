@@ -42,26 +42,6 @@ def pair_arms(name: str) -> tuple[Cell, str, str]:
     return system_pair_cell(name)
 
 
-def _matrix(position: tuple[float, ...], quaternion: tuple[float, ...]) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = np.reshape(pb.getMatrixFromQuaternion(quaternion), (3, 3))
-    T[:3, 3] = position
-    return T
-
-
-def inertial_offset(world: CellWorld, arm_id: str) -> np.ndarray:
-    """The base link's inertial frame in its link frame (4, 4): PyBullet reports bases by it
-    (:meth:`~nehmo_core.geometry.pybullet_world.CellWorld.set_base_pose` composes it on)."""
-    local = pb.getDynamicsInfo(world.body(arm_id), -1, physicsClientId=world.client)[3:5]
-    return _matrix(local[0], local[1])
-
-
-def base_link_frame(world: CellWorld, arm_id: str) -> np.ndarray:
-    """Where the arm's base link frame is now in the world (4, 4)."""
-    com = pb.getBasePositionAndOrientation(world.body(arm_id), physicsClientId=world.client)
-    return _matrix(com[0], com[1]) @ np.linalg.inv(inertial_offset(world, arm_id))
-
-
 class SphereCover:
     """Balls that cover one arm's collision geometry, fixed in its link frames.
 
@@ -79,12 +59,13 @@ class SphereCover:
         self.kinematics = ArmKinematics(arm.robot)  # in the arm's own base frame
         body = world.body(arm_id)
         world.set_joint_positions(arm_id, np.zeros(arm.robot.dof))
-        base_pose = base_link_frame(world, arm_id)
+        base_pose = world.base_link_frame(arm_id)
         at_zero = self.kinematics.link_transforms(
             torch.zeros(1, arm.robot.dof, dtype=torch.float64)
         )
-        links, centres, radii = [], [], []
-        for name, index in world._link_index[arm_id].items():
+        centres: dict[str, list[np.ndarray]] = {}  # per link, in chain order
+        radii: list[float] = []
+        for name, index in world.links(arm_id).items():
             if not pb.getCollisionShapeData(body, index, physicsClientId=world.client):
                 continue  # no collision geometry
             if name not in at_zero:
@@ -101,20 +82,13 @@ class SphereCover:
             for k in range(count):
                 centre = lo + 0.5 * piece
                 centre[axis] = lo[axis] + (k + 0.5) * step
-                links.append(name)
-                centres.append(T_link_world[:3, :3] @ centre + T_link_world[:3, 3])
+                centres.setdefault(name, []).append(
+                    T_link_world[:3, :3] @ centre + T_link_world[:3, 3]
+                )
                 radii.append(0.5 * float(np.linalg.norm(piece)))
-        self.links = links
-        self.centres = np.array(centres)  # (S, 3) in each ball's link frame
+        # ball centres (in their link frame) per link, in the order world() returns them
+        self._by_link = [(n, torch.as_tensor(np.array(c))) for n, c in centres.items()]
         self.radii = np.array(radii)  # (S,) [m]
-        order = list(dict.fromkeys(links))  # balls grouped by link, in the order world() returns
-        self._by_link = [
-            (n, torch.as_tensor(self.centres[[i for i, m in enumerate(links) if m == n]]))
-            for n in order
-        ]
-        perm = [i for n in order for i, m in enumerate(links) if m == n]
-        self.links = [links[i] for i in perm]
-        self.centres, self.radii = self.centres[perm], self.radii[perm]
 
     def world(self, q: np.ndarray, base: np.ndarray) -> torch.Tensor:
         """Ball centres (B, S, 3) for joint angles ``q (B, dof)`` and base poses ``(B, 4, 4)``."""
@@ -169,8 +143,8 @@ class PairDistance:
                 SphereCover(self.world, self.arm_b),
             )
             self._fixed = (
-                base_link_frame(self.world, self.arm_a),
-                base_link_frame(self.world, self.arm_b),
+                self.world.base_link_frame(self.arm_a),
+                self.world.base_link_frame(self.arm_b),
             )
         x = np.asarray(x, dtype=np.float64)
         n1, n2, batch = self.n1, self.n2, x.shape[0]
