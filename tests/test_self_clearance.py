@@ -23,6 +23,19 @@ def clearance(request: pytest.FixtureRequest) -> SelfClearance:
     sc.close()
 
 
+def test_instances_share_one_world_per_robot_and_the_last_close_ends_it() -> None:
+    a, b = SelfClearance(load_robot("ur5")), SelfClearance(load_robot("ur5"))
+    client = a._world.client
+    assert b._world is a._world
+    a.close()
+    a.close()  # twice is harmless
+    assert pb.isConnected(physicsClientId=client)
+    q = np.array([0.0, -1.0, 2.0, 0.0, 0.5, 0.0])
+    assert b.rows(q).count >= 0  # still usable
+    b.close()
+    assert not pb.isConnected(physicsClientId=client)
+
+
 def _random_q(robot, rng: np.random.Generator) -> np.ndarray:
     return rng.uniform(np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi))
 

@@ -99,16 +99,17 @@ def _run(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult, dic
     }
     log_path = _log_path(config, row, task)
     remove_bag(log_path)
-    result = run_episode(
-        cell,
-        task.scenario,
-        planners,
-        settings,
-        kinds=kinds,
-        simulator=CellSimulator(cell, settings.substeps, settings.self_collision),
-        log_path=log_path,
-        metadata={"task": task.task_id, "task_file": str(task.path), "row": row, **used},
-    )
+    with CellSimulator(cell, settings.substeps, settings.self_collision) as sim:
+        result = run_episode(
+            cell,
+            task.scenario,
+            planners,
+            settings,
+            kinds=kinds,
+            simulator=sim,
+            log_path=log_path,
+            metadata={"task": task.task_id, "task_file": str(task.path), "row": row, **used},
+        )
     return result, used
 
 

@@ -19,6 +19,7 @@ inside ``d_s`` may not get closer.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pybullet as pb
@@ -53,6 +54,11 @@ MIN_GRADIENT = 1e-4
 
 _WITNESS_ORDER: dict[str, dict[tuple[str, str], bool]] = {}
 """Per robot: :meth:`SelfClearance._witness_order` (found once per process)."""
+
+_WORLDS: dict[tuple[str, str], list[Any]] = {}
+"""Per robot: one PyBullet world that every :class:`SelfClearance` of the process shares (each
+query sets the joints first), and how many instances use it. A world per instance would keep
+a PyBullet client (~30 MB) alive for every planner ever built, since planners are not closed."""
 
 
 def project_step(target: np.ndarray, rows: SelfClearanceRows, y_max: float) -> np.ndarray:
@@ -92,8 +98,14 @@ class SelfClearance:
             raise InvalidValueError("self_gain", "must lie in (0, 1]", gain)
         self.robot = robot
         self.influence, self.safety, self.gain = influence, safety, gain
-        arm = ArmSpec("self", robot, Pose())
-        self._world = CellWorld(Cell(f"self_{robot.name}", (arm,)))
+        self._key = (robot.name, str(robot.urdf_path))
+        shared = _WORLDS.get(self._key)
+        if shared is None:
+            arm = ArmSpec("self", robot, Pose())
+            shared = _WORLDS[self._key] = [CellWorld(Cell(f"self_{robot.name}", (arm,))), 0]
+        shared[1] += 1
+        self._world: CellWorld = shared[0]
+        self._closed = False
         self._client = self._world.client
         self._body = self._world.body("self")
         self._pairs = [
@@ -162,7 +174,15 @@ class SelfClearance:
         return {pair: vote < 0 for pair, vote in votes.items()}
 
     def close(self) -> None:
-        self._world.close()
+        """Release the shared world (closed with its last user)."""
+        if self._closed:
+            return
+        self._closed = True
+        shared = _WORLDS[self._key]
+        shared[1] -= 1
+        if shared[1] == 0:
+            del _WORLDS[self._key]
+            self._world.close()
 
     def _gradients(
         self,
