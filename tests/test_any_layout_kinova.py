@@ -4,6 +4,7 @@ Kinova-controls game ``kinova_ur5_any``, on untrained networks (no weights are s
 from __future__ import annotations
 
 import copy
+import json
 import math
 from collections.abc import Iterator
 from pathlib import Path
@@ -129,7 +130,9 @@ def test_untrained_models_are_a_clear_error(
         dm.load_distance_model("kinova_ur5_any")  # the swapped game has no distance of its own
 
 
-def test_distance_cli_generates_trains_and_calibrates_the_pair(tmp_path: Path) -> None:
+def test_distance_cli_generates_trains_and_calibrates_the_pair(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     data, out = tmp_path / "d.npz", tmp_path / "distance_ur5_kinova_any.safetensors"
     pair = ["--pair", "ur5_kinova_any"]
     generate = ["--uniform", "300", "--boundary", "0", "--seed", "1", "--workers", "1"]
@@ -138,8 +141,18 @@ def test_distance_cli_generates_trains_and_calibrates_the_pair(tmp_path: Path) -
         q, d = f["q"], f["d"]
     assert q.shape == (300, 13) and d.shape == (300,)
     assert dd.BASE_RANGE[0] <= q[:, 12].min() and q[:, 12].max() <= dd.BASE_RANGE[1]
+    more = tmp_path / "more.npz"
+    generate[-3] = "2"  # another seed
+    assert cli_main(["distance", "generate", *pair, *generate, "--out", str(more)]) == 0
     train = ["--hidden", "8", "--epochs", "1", "--out", str(out)]
-    assert cli_main(["distance", "train", *pair, "--data", str(data), *train]) == 0
+    assert cli_main(["distance", "train", *pair, "--data", str(data), str(data), *train]) != 0
+    assert "files must come from distinct seeds" in capsys.readouterr().err
+    assert cli_main(["distance", "train", "--pair", "ur5_ur5_any", "--data", str(data), *train])
+    assert "must hold samples of pair 'ur5_ur5_any'" in capsys.readouterr().err
+    assert cli_main(["distance", "train", *pair, "--data", str(data), str(more), *train]) == 0
+    card = json.loads(out.with_suffix(".json").read_text())
+    assert [m["n"] for m in card["data"]["train"]] == [300, 300]
+    assert card["training"]["calibration_samples"] == 30  # 5 % of the 600 joined samples
     calibrate = ["--data", str(data), "--model", str(out)]
     assert cli_main(["distance", "calibrate", *pair, *calibrate]) == 0
     model = load_distance_file(out, "ur5_kinova_any")

@@ -43,7 +43,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--out", type=Path, required=True, help="output .npz file")
     t = sub.add_parser("train", help="fit a distance model on a generated dataset")
     t.add_argument("--pair", choices=ALL_PAIRS, required=True)
-    t.add_argument("--data", type=Path, required=True, help="training .npz from 'generate'")
+    t.add_argument(
+        "--data",
+        type=Path,
+        nargs="+",
+        required=True,
+        help="training .npz files from 'generate' (several are joined; distinct seeds)",
+    )
     t.add_argument("--test", type=Path, help="held-out .npz (fresh seed) to report accuracy on")
     t.add_argument("--hidden", type=str, default="128,128,128", help="hidden widths, e.g. 128,128")
     t.add_argument("--epochs", type=int, default=DistanceTrainSettings.epochs)
@@ -131,6 +137,29 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _training_data(
+    pair: str, paths: list[Path]
+) -> tuple[np.ndarray, np.ndarray, dict[str, object] | list[dict[str, object]]]:
+    """Join the datasets of ``paths``: all of ``pair``, each from its own seed."""
+    parts = [load_dataset(p) for p in paths]
+    seeds: dict[object, Path] = {}
+    for path, (_, _, meta) in zip(paths, parts, strict=True):
+        spec = meta.get("spec")
+        got = spec.get("pair") if isinstance(spec, dict) else None
+        if got != pair:
+            raise InvalidValueError("--data", f"must hold samples of pair {pair!r}", str(path))
+        seed = spec.get("seed") if isinstance(spec, dict) else None
+        if seed in seeds:
+            raise InvalidValueError(
+                "--data", f"files must come from distinct seeds ({seeds[seed].name} too)", str(path)
+            )
+        seeds[seed] = path
+    q = np.concatenate([p[0] for p in parts])
+    d = np.concatenate([p[1] for p in parts])
+    metas = [p[2] for p in parts]
+    return q, d, metas[0] if len(metas) == 1 else metas
+
+
 def _train(args: argparse.Namespace) -> int:
     try:
         hidden = tuple(int(h) for h in args.hidden.split(","))
@@ -140,7 +169,7 @@ def _train(args: argparse.Namespace) -> int:
         ) from None
     with as_options(_TRAIN_OPTIONS):
         settings = DistanceTrainSettings(hidden=hidden, epochs=args.epochs, seed=args.seed)
-    q, d, meta = load_dataset(args.data)
+    q, d, meta = _training_data(args.pair, args.data)
     model, summary = train(args.pair, q, d, settings)
     card: dict[str, object] = {
         "pair": args.pair,
@@ -151,7 +180,7 @@ def _train(args: argparse.Namespace) -> int:
             if args.pair in CONDITIONED_PAIRS
             else "q = (q_arm1, q_arm2) [rad] in each robot's URDF joint order"
         ),
-        "data": {"train": meta, "file": args.data.name},
+        "data": {"train": meta, "file": ", ".join(p.name for p in args.data)},
         "training": {**settings.__dict__, **summary},
     }
     if args.test is not None:

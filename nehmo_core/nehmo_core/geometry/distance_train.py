@@ -120,7 +120,7 @@ def train(
             loss.backward()
             opt.step()
             sched.step()
-            acc += float(loss)
+            acc += float(loss.detach())
         last = acc / steps_per_epoch
         bar.set_postfix(loss=f"{last:.3e}")
     model.mlp.double()
