@@ -10,17 +10,10 @@ damper rows and the fail-safe is projected onto them (:mod:`.self_clearance`). P
 reach are skipped; peers in reach that no model fits are reported as unmodelled (they are not
 constrained, so a caller must treat them as a configuration error or accept the risk).
 
-Stall escape (``escape``, on by default; not in the paper): Opt only ever takes the step closest
-to the goal, so an arm whose goal lies behind a peer's level set stops where the goal direction
-meets the constraint (a local minimum on the safe set). After ``stall_ticks`` calls without
-progress against an active V row, the arm swaps its goal cost for a target step along a random
-direction projected onto the tangent space of the critical pair's level set, for
-``escape_ticks`` calls (doubled, up to 4×, when it stalls again before its goal error has
-reached a new low), then heads for the goal again. An arm held at its goal against a peer's
-constraint for ``stall_ticks`` calls yields: for ``yield_ticks`` calls it steps up V's gradient
-of the critical pair (making room for a peer that may be stuck behind it), then returns. Every
-escape step is an Opt solution with the same constraints, so safety is unchanged. A call with a
-goal other than the previous call's ends any escape or yield and restarts the stall count.
+Not in the paper, on by default: the stall escape (``escape``, :mod:`.stall_escape`) leaves a
+local minimum on the safe set, or yields the goal, through Opt solutions with the same
+constraints (safety unchanged); the exact guard (``exact_guard``, :mod:`.exact_guard`) shortens
+a step that would bring the arm's real geometry too close to a peer holding at its goal.
 """
 
 from __future__ import annotations
@@ -38,6 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError
+from nehmo_core.planning.exact_guard import GUARD_NEAR, guard_step, prepare
 from nehmo_core.planning.fail_safe import MaximinFailSafe, maximin_command
 from nehmo_core.planning.interface import (
     PlanResult,
@@ -113,8 +107,7 @@ class NehmoPlanner(StallEscape):
                 )
         self.solver = solver or make_solver(self.settings)
         if isinstance(self.solver, SqpSolver) and self.solver.native:
-            # build (first use in this cache) and load the C loop and the models' handles now,
-            # not inside the first tick's deadline
+            # build (first use in this cache) and load the C loop and models now, not in a tick
             c_loop = loop()
             if c_loop is not None:
                 for model in self.models:
@@ -143,6 +136,8 @@ class NehmoPlanner(StallEscape):
         self.settings = self.settings.replace(epsilon=self.margins.epsilon)
         self.reset()
         s = self.settings
+        if s.exact_guard > 0.0 and s.hold_bound < FULL_SPEED and self.pairs:
+            prepare(cell)
         self.self_clearance = (
             SelfClearance(self.robot, s.self_influence, s.self_safety, s.self_gain)
             if s.self_clearance
@@ -177,6 +172,7 @@ class NehmoPlanner(StallEscape):
         seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape_seed
         self._rng = np.random.default_rng(seed)
         self._clear_stall()
+        self.guarded = 0  # commands the exact guard shortened (planning/exact_guard.py)
 
     # -- announced speed bound ---------------------------------------------------------------
     def _announce(
@@ -434,6 +430,10 @@ class NehmoPlanner(StallEscape):
             u = self._fail_safe(now, rows, cap)
             self._warm = None
             min_constraint, fail_safe = math.nan, True
+        near = [p for p, v in zip(now.ids, now.values, strict=True) if v < GUARD_NEAR]
+        held = {p: others[p] for p in near if p in participants and bounds[p] < FULL_SPEED}
+        share = guard_step(self.cell, self.arm_id, q, u, held, self.settings)
+        u, self.guarded = u * share, self.guarded + (share < 1.0)
         if self.settings.escape:
             self._track_stall(error0, min_constraint < self.settings.stall_margin)
         telemetry = Telemetry(

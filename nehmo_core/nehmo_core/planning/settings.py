@@ -20,6 +20,7 @@ PAPER_OPT: dict[str, Any] = {
     "escape": False,
     "fail_safe": "single",
     "hold_bound": 1.0,
+    "exact_guard": 0.0,
     "certified_epsilon": False,
 }
 """What the paper's Opt leaves out of NeHMO's defaults (the ``paper`` preset, ``nehmo_paper``)."""
@@ -77,6 +78,10 @@ class PlannerSettings:
     hold_bound: float = 0.2
     hold_tolerance: float = 0.05
     bound_release_ticks: int = 2
+    # commands are shortened so that the arm's real geometry (PyBullet) stays exact_guard [m]
+    # from every peer that holds at its goal under an announced bound (planning/exact_guard.py;
+    # 0: off)
+    exact_guard: float = 0.01
     # self-collision velocity dampers on the step and the fail-safe (not in the paper's Opt):
     # link pairs closer than self_influence [m] may close at most self_gain of their distance
     # above self_safety [m] per planned step (planning/self_clearance.py)
@@ -149,6 +154,8 @@ class PlannerSettings:
             raise InvalidValueError("fail_safe_band", "must be >= 0 [m]", self.fail_safe_band)
         if not self.fail_safe_slack >= 0.0:
             raise InvalidValueError("fail_safe_slack", "must be >= 0 [m]", self.fail_safe_slack)
+        if not self.exact_guard >= 0.0:
+            raise InvalidValueError("exact_guard", "must be >= 0 [m] (0: off)", self.exact_guard)
         if not self.self_safety >= 0.0:
             raise InvalidValueError("self_safety", "must be >= 0", self.self_safety)
         if not self.self_influence > self.self_safety:

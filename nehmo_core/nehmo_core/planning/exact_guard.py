@@ -1,0 +1,88 @@
+"""The exact-geometry guard of a NeHMO arm beside peers that hold still at their goals.
+
+Against a peer that announced a speed bound (it holds at its goal, :mod:`.speed_bounds`) the
+value rows keep only the settled margin, and the learned distance under them can err by a few
+centimetres near contact. The guard closes that gap with the arms' real geometry: before a
+command is sent, the arm's pose after the step (and halfway) is checked against every holding
+peer's current pose with PyBullet. A step that would bring the arms closer than
+``exact_guard`` [m] is shortened (to ½, ¼ of it, or nothing) until it does not, unless the
+arms are already closer and the step does not bring them closer still. The peer's own motion
+within its bound is left to the value rows; a peer that breaks its bound is fled from by the
+threat test as before.
+
+One PyBullet world per cell is shared by the planners of a process (the two most recent cells
+are kept; the planners of an older cell get a fresh one if they plan again).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Mapping
+
+import numpy as np
+
+from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.robots.model import Cell
+
+__all__ = ["GUARD_NEAR", "guard_step", "prepare"]
+
+GUARD_NEAR = 0.15
+"""Only peers whose ``V`` now reads below this [m] are checked (the learned values err by a few
+centimetres; a step moves the arm's points a few centimetres at most)."""
+
+_WORLDS: OrderedDict[tuple[object, ...], CellWorld] = OrderedDict()
+_KEEP = 2
+_SCALES = (1.0, 0.5, 0.25)
+
+
+def _cell_key(cell: Cell) -> tuple[object, ...]:
+    return tuple(
+        (a.arm_id, a.robot.name, str(a.robot.urdf_path), a.base.xyz, a.base.rpy) for a in cell.arms
+    )
+
+
+def _world(cell: Cell) -> CellWorld:
+    key = _cell_key(cell)
+    world = _WORLDS.get(key)
+    if world is None:
+        world = _WORLDS[key] = CellWorld(cell)
+        while len(_WORLDS) > _KEEP:
+            _WORLDS.popitem(last=False)[1].close()
+    _WORLDS.move_to_end(key)
+    return world
+
+
+def prepare(cell: Cell) -> None:
+    """Build ``cell``'s world now (a planner does it when built, not in its first tick)."""
+    _world(cell)
+
+
+def guard_step(
+    cell: Cell,
+    arm_id: str,
+    q: np.ndarray,
+    u: np.ndarray,
+    held: Mapping[str, np.ndarray],
+    settings: PlannerSettings,
+) -> float:
+    """The share of the command ``u`` [rad/s] (1, ½, ¼ or 0), held for ``t_plan``, that keeps
+    arm ``arm_id`` at least ``exact_guard`` [m] from every peer of ``held`` (``{peer: q}``, posed
+    as given) at the step's end and midpoint, or no closer than now where it already is closer."""
+    floor, step = settings.exact_guard, u * settings.t_plan
+    if not held or floor <= 0.0:
+        return 1.0
+    world = _world(cell)
+    cutoff = 2.0 * floor + 0.05
+    world.set_configuration(held)
+
+    def closest(x: np.ndarray) -> float:
+        world.set_joint_positions(arm_id, x)
+        return min(world.distance(arm_id, p, cutoff) for p in held)
+
+    now = closest(q)
+    for scale in _SCALES:
+        ends = [closest(q + scale * step), closest(q + 0.5 * scale * step)]
+        if min(ends) >= min(floor, now):
+            return scale
+    return 0.0

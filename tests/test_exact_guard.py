@@ -1,0 +1,99 @@
+"""The exact guard: beside a peer holding at its goal, the arm's real geometry keeps its floor
+even where the learned rows would let it closer, and the guard leaves other steps alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nehmo_core.errors import InvalidValueError
+from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.planning.exact_guard import guard_step
+from nehmo_core.planning.models import ModelRegistry
+from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.robots import load_cell
+
+DT = 0.04
+CELL = load_cell("dual_ur5")
+OWN, PEER = CELL.arm_ids
+FLOOR = 0.03
+
+
+@pytest.fixture(scope="module")
+def world() -> CellWorld:
+    w = CellWorld(CELL)
+    yield w
+    w.close()
+
+
+def _folded(world: CellWorld) -> bool:
+    return any(c.arm_a == c.arm_b for c in world.collisions())
+
+
+def _goal_inside_peer(world: CellWorld) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A held peer pose, and a goal of the arm in contact with it, with a free start."""
+    rng = np.random.default_rng(7)
+    robot = CELL.arm(OWN).robot
+    for _ in range(4000):
+        peer = rng.uniform(-1.5, 1.5, 6)
+        goal = rng.uniform(-1.5, 1.5, 6)
+        world.set_configuration({OWN: goal, PEER: peer})
+        if not -0.03 < world.distance(OWN, PEER) < 0.0 or _folded(world):
+            continue
+        start = goal.copy()
+        start[0] += 1.4  # swing the shoulder away
+        world.set_joint_positions(OWN, start)
+        if world.distance(OWN, PEER) > 0.15 and not _folded(world):
+            assert robot.dof == 6
+            return peer, goal, start
+    raise AssertionError("no such scenario in the draws")
+
+
+def _closest(world: CellWorld, settings: PlannerSettings, models: list) -> tuple[float, int]:
+    """Drive the arm toward a goal inside a peer that holds (bound 0.2) still; the closest exact
+    distance it reaches and how many steps the guard shortened."""
+    peer, goal, start = _goal_inside_peer(world)
+    planner = NehmoPlanner(CELL, OWN, models, settings)
+    q, closest = start.copy(), np.inf
+    for _ in range(250):
+        result = planner.plan(q, {PEER: peer}, goal, peer_bounds={PEER: 0.2})
+        q = q + result.velocity * DT
+        world.set_configuration({OWN: q, PEER: peer})
+        closest = min(closest, world.distance(OWN, PEER))
+    return closest, planner.guarded
+
+
+@pytest.fixture(scope="module")
+def models() -> list:
+    return ModelRegistry().models_for("nehmo", CELL)
+
+
+def test_the_guard_keeps_the_floor_where_the_learned_rows_would_not(
+    world: CellWorld, models: list
+) -> None:
+    # a settled floor of 1 mm lets the learned rows run the arm into the held peer's geometry
+    loose = PlannerSettings(settled_epsilon=1e-3, exact_guard=0.0, escape=False)
+    unguarded, _ = _closest(world, loose, models)
+    assert unguarded < FLOOR - 0.01
+    guarded, shortened = _closest(world, loose.replace(exact_guard=FLOOR), models)
+    assert shortened > 0
+    assert guarded >= FLOOR - 0.005  # discrete checks of a straight step
+
+
+def test_the_guard_leaves_steps_alone_without_a_held_peer_or_when_off(world: CellWorld) -> None:
+    settings = PlannerSettings(exact_guard=FLOOR)
+    q, u = np.zeros(6), np.full(6, 0.5)
+    assert guard_step(CELL, OWN, q, u, {}, settings) == 1.0
+    assert guard_step(CELL, OWN, q, u, {PEER: np.zeros(6)}, settings.replace(exact_guard=0)) == 1
+    with pytest.raises(InvalidValueError, match="exact_guard.*>= 0"):
+        PlannerSettings(exact_guard=-0.01)
+
+
+def test_a_step_that_opens_the_gap_passes_even_below_the_floor(world: CellWorld) -> None:
+    peer, goal, start = _goal_inside_peer(world)
+    settings = PlannerSettings(exact_guard=FLOOR)
+    toward, away = (goal - start), (start - goal)
+    step = 0.5 / np.abs(toward).max()  # full speed on the largest joint
+    assert guard_step(CELL, OWN, goal, away * step, {PEER: peer}, settings) == 1.0
+    assert guard_step(CELL, OWN, goal, toward * step, {PEER: peer}, settings) < 1.0
