@@ -86,7 +86,7 @@ def test_the_guard_leaves_steps_alone_without_a_held_peer_or_when_off(world: Cel
     q, u = np.zeros(6), np.full(6, 0.5)
     assert guard_step(CELL, OWN, q, u, {}, settings) == 1.0
     assert guard_step(CELL, OWN, q, u, {PEER: np.zeros(6)}, settings.replace(exact_guard=0)) == 1
-    with pytest.raises(InvalidValueError, match="exact_guard.*>= 0"):
+    with pytest.raises(InvalidValueError, match=r"exact_guard.*>= 0"):
         PlannerSettings(exact_guard=-0.01)
 
 
