@@ -16,6 +16,8 @@ from nehmo_core.planning.synthetic import random_value_function
 from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots import load_cell
 
+FLOOR = PlannerSettings().settled_epsilon  # the default floor of rows against a settled peer
+
 
 @pytest.fixture(scope="module")
 def model() -> PairValueModel:
@@ -70,7 +72,7 @@ def test_full_speed_rows_keep_one_epsilon_slow_rows_their_own_level(model: PairV
     assert planner.settings.epsilon == pytest.approx(0.09)  # the cell-wide ε: the largest δ
     assert planner.group_margin(0, 1.0) == planner.group_margin(1, 1.0) == pytest.approx(0.09)
     assert planner.group_margin(0, 0.2) == pytest.approx(0.07)  # its own level at 0.06 s
-    assert planner.group_margin(1, 0.2) == pytest.approx(0.05)  # the 0.3 s level 0, the floor
+    assert planner.group_margin(1, 0.2) == pytest.approx(FLOOR)  # the 0.3 s level 0, the floor
 
 
 def test_rows_against_a_slow_peer_keep_the_level_certified_at_their_horizon(
@@ -83,7 +85,7 @@ def test_rows_against_a_slow_peer_keep_the_level_certified_at_their_horizon(
     assert planner.group_margin(0, 0.5) == pytest.approx(0.09)  # τ = 0.15: the 0.3 s level
     assert planner.group_margin(0, 1.0) == pytest.approx(0.09)  # full speed: ε
     low = dataclasses.replace(model, certificates=(_cert(0.3, 0.09), _cert(0.06, 0.01)))
-    assert _planner(low).group_margin(0, 0.2) == pytest.approx(0.05)  # never below the floor
+    assert _planner(low).group_margin(0, 0.2) == pytest.approx(max(0.01, FLOOR))  # the floor
     paper = _planner(dataclasses.replace(model, certificates=certs), "nehmo_paper")
     assert paper.group_margin(0, 0.2) == paper.group_margin(0, 1.0) == pytest.approx(0.05)
 
@@ -92,7 +94,7 @@ def test_a_slow_peers_rows_carry_their_margin_into_opt(model: PairValueModel) ->
     certs = (_cert(0.3, 0.09), _cert(0.06, 0.0))
     planner = _planner(dataclasses.replace(model, certificates=certs))
     q = np.zeros(6)
-    for bound, margin in ((1.0, 0.09), (0.2, 0.05)):
+    for bound, margin in ((1.0, 0.09), (0.2, FLOOR)):
         now = planner._current(q, {"ur5_1": q}, {"ur5_1": bound})
         problem = planner._problem(q - 0.5, now)
         assert problem.constraints.margins == pytest.approx((margin,))
@@ -105,12 +107,12 @@ def test_a_slow_peers_rows_carry_their_margin_into_opt(model: PairValueModel) ->
 
 def test_a_settled_floor_lowers_only_rows_against_a_settled_peer(model: PairValueModel) -> None:
     certs = (_cert(0.3, 0.09), _cert(0.06, 0.0), _cert(0.1, 0.03))
-    planner = _planner(dataclasses.replace(model, certificates=certs), settled_epsilon=0.02)
+    planner = _planner(dataclasses.replace(model, certificates=certs), settled_epsilon=0.015)
     assert planner.settings.epsilon == pytest.approx(0.09)  # full-speed rows: unchanged
     assert planner.group_margin(0, 1.0) == pytest.approx(0.09)
-    assert planner.group_margin(0, 0.2) == pytest.approx(0.02)  # δ = 0 at 0.06 s: the floor
+    assert planner.group_margin(0, 0.2) == pytest.approx(0.015)  # δ = 0 at 0.06 s: the floor
     assert planner.group_margin(0, 0.3) == pytest.approx(0.03)  # δ at 0.1 s is above it
-    assert "max(0.02" in planner.epsilon_source
+    assert "max(0.015" in planner.epsilon_source
     paper = _planner(dataclasses.replace(model, certificates=certs), certified_epsilon=False)
     assert paper.group_margin(0, 0.2) == pytest.approx(0.05)
 
