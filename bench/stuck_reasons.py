@@ -1,12 +1,13 @@
 """Why NeHMO episodes end stuck: each stuck episode of the fresh tables, sorted by what held it.
 
-    ./run python bench/stuck_reasons.py --seeds 39,40   # bench/results/stuck_reasons.{json,md}
+    ./run python bench/stuck_reasons.py --seeds 41,42   # bench/results/stuck_reasons.{json,md}
 
 Read from the episode logs of the ``nehmo`` rows (``bench/results/fresh/seed<S>/``; the logs are
 where those runs wrote them). For each stuck episode, with exact PyBullet distances:
 
-- ``goals closer than 5 cm``: with every arm at its goal, some pair is closer than the 0.05 m floor
-  of the margin, so no planner that keeps it can finish exactly;
+- ``goals closer than the floor``: with every arm at its goal, some pair is closer than the floor
+  against settled peers (``settled_epsilon``, 2 cm; 5 cm up to seeds 39 and 40), so no planner
+  that keeps it can finish exactly;
 - ``blocked by a settled peer``: at the end an arm is within ``hold_tolerance`` of its goal
   (settled) and a peer still far from its own (> 0.1 rad) is within 0.2 m of it;
 - ``mutual block``: no arm near a stalled arm is settled, but two arms are within 0.2 m;
@@ -34,8 +35,9 @@ SETUPS = {
     "five_ur5": ("table_III_five_ur5.json", "nehmo"),
     "ur5_kinova_challenging": ("table_IV_ur5_kinova_challenging.json", "nehmo/nehmo"),
 }
-NEAR, FLOOR, FAR_FROM_GOAL = 0.2, 0.05, 0.1  # [m], [m], [rad]
-REASONS = ("goals closer than 5 cm", "blocked by a settled peer", "mutual block", "alone")
+NEAR, FAR_FROM_GOAL = 0.2, 0.1  # [m], [rad]
+FLOOR = PlannerSettings().settled_epsilon  # [m]
+REASONS = (f"goals closer than {FLOOR * 100:g} cm", "blocked by a settled peer", "mutual block", "alone")
 
 
 def reason(path: str, world: CellWorld | None) -> tuple[str, CellWorld]:
@@ -62,7 +64,7 @@ def reason(path: str, world: CellWorld | None) -> tuple[str, CellWorld]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", default="39,40")
+    parser.add_argument("--seeds", default="41,42")
     args = parser.parse_args()
     out: dict[str, dict[str, dict[str, int]]] = {}
     lines = [
