@@ -37,7 +37,12 @@ SETUPS = {
 }
 NEAR, FAR_FROM_GOAL = 0.2, 0.1  # [m], [rad]
 FLOOR = PlannerSettings().settled_epsilon  # [m]
-REASONS = (f"goals closer than {FLOOR * 100:g} cm", "blocked by a settled peer", "mutual block", "alone")
+REASONS = (
+    f"goals closer than {FLOOR * 100:g} cm",
+    "blocked by a settled peer",
+    "mutual block",
+    "alone",
+)
 
 
 def reason(path: str, world: CellWorld | None) -> tuple[str, CellWorld]:
