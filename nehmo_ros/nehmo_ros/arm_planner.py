@@ -119,6 +119,9 @@ PARAMS: dict[str, Param] = {
         0.0,
         1.0,
     ),
+    "exact_guard": Param(
+        _PLANNER.exact_guard, "[m] exact clearance from peers holding at their goals (0: off)", 0, 1
+    ),
     "hold_bound": Param(
         _PLANNER.hold_bound, "speed bound announced at the goal, share of u_max (1: none)", 0.0, 1.0
     ),
@@ -206,6 +209,7 @@ class ArmPlannerNode(Node):
             fail_safe_slack=float(p["fail_safe_slack"]),
             hold_bound=float(p["hold_bound"]),
             hold_tolerance=float(p["hold_tolerance"]),
+            exact_guard=float(p["exact_guard"]),
         )
         planner = build_planner(
             p["planner"], self.cell, arm_id, p["model"], settings, bool(p["allow_unmodelled"])
