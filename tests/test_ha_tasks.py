@@ -20,8 +20,7 @@ from nehmo_core.eval.ha_tasks import (
     pair_distances,
 )
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.self_clearance import SelfClearance
-from nehmo_core.robots.loader import load_robot
+from nehmo_core.planning import exact_guard, self_clearance
 
 TASKS = Path(__file__).parent / "data" / "ha_tasks"
 
@@ -79,7 +78,11 @@ def test_starts_and_goals_are_collision_free_for_our_geometry() -> None:
 
 
 def _pybullet_clients() -> set[int]:
-    return {i for i in range(256) if pb.isConnected(physicsClientId=i)}
+    """Connected PyBullet clients, less the worlds a process keeps on purpose (one self-clearance
+    world per robot, the exact guard's two most recent cells)."""
+    kept = {w[0].client for w in self_clearance._WORLDS.values()}
+    kept |= {w.client for w in exact_guard._WORLDS.values()}
+    return {i for i in range(256) if pb.isConnected(physicsClientId=i)} - kept
 
 
 def test_evaluate_tasks_writes_rows_per_arm_count(tmp_path: Path) -> None:
@@ -88,7 +91,6 @@ def test_evaluate_tasks_writes_rows_per_arm_count(tmp_path: Path) -> None:
     for name in ("135003.json", "135011.json", "135000.json"):  # 1 arm, 2 arms, obstacles
         shutil.copy(TASKS / name, tasks / name)
     out = tmp_path / "out"
-    shared = SelfClearance(load_robot("ur5"))  # the one self-clearance world a process keeps
     before = _pybullet_clients()
     code = evaluate_main(
         ["--tasks", str(tasks), "--planners", "naive,nehmo", "--out", str(out), "--no-progress"]
@@ -97,7 +99,6 @@ def test_evaluate_tasks_writes_rows_per_arm_count(tmp_path: Path) -> None:
     # every task's simulator and planners let their PyBullet clients go (a task run once kept
     # ~120 MB per four-arm task until the worker ended)
     assert _pybullet_clients() == before
-    shared.close()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["skipped"] == [{"task": "135000", "arms": 3, "reason": "obstacles"}]
     rows = {r["row"]: r for r in summary["rows"]}

@@ -8,6 +8,7 @@ import pytest
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.planning import self_clearance
 from nehmo_core.planning.self_clearance import SelfClearance, project_step
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.loader import load_robot
@@ -23,7 +24,10 @@ def clearance(request: pytest.FixtureRequest) -> SelfClearance:
     sc.close()
 
 
-def test_instances_share_one_world_per_robot_and_the_last_close_ends_it() -> None:
+def test_instances_share_one_world_per_robot_and_the_last_close_ends_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(self_clearance, "_WORLDS", {})  # no users left by other tests
     a, b = SelfClearance(load_robot("ur5")), SelfClearance(load_robot("ur5"))
     client = a._world.client
     assert b._world is a._world
