@@ -80,7 +80,7 @@ def test_starts_and_goals_are_collision_free_for_our_geometry() -> None:
 def _pybullet_clients() -> set[int]:
     """Connected PyBullet clients, less the worlds a process keeps on purpose (one self-clearance
     world per robot, the exact guard's two most recent cells)."""
-    kept = {w[0].client for w in self_clearance._WORLDS.values()}
+    kept = {w.world.client for w in self_clearance._WORLDS.values()}
     kept |= {w.client for w in exact_guard._WORLDS.values()}
     return {i for i in range(256) if pb.isConnected(physicsClientId=i)} - kept
 

@@ -31,25 +31,18 @@ GUARD_NEAR = 0.15
 """Only peers whose ``V`` now reads below this [m] are checked (the learned values err by a few
 centimetres; a step moves the arm's points a few centimetres at most)."""
 
-_WORLDS: OrderedDict[tuple[object, ...], CellWorld] = OrderedDict()
+_WORLDS: OrderedDict[Cell, CellWorld] = OrderedDict()  # cells compare by value
 _KEEP = 2
 _SCALES = (1.0, 0.5, 0.25)
 
 
-def _cell_key(cell: Cell) -> tuple[object, ...]:
-    return tuple(
-        (a.arm_id, a.robot.name, str(a.robot.urdf_path), a.base.xyz, a.base.rpy) for a in cell.arms
-    )
-
-
 def _world(cell: Cell) -> CellWorld:
-    key = _cell_key(cell)
-    world = _WORLDS.get(key)
+    world = _WORLDS.get(cell)
     if world is None:
-        world = _WORLDS[key] = CellWorld(cell)
+        world = _WORLDS[cell] = CellWorld(cell)
         while len(_WORLDS) > _KEEP:
             _WORLDS.popitem(last=False)[1].close()
-    _WORLDS.move_to_end(key)
+    _WORLDS.move_to_end(cell)
     return world
 
 

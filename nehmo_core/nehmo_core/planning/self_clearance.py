@@ -19,7 +19,6 @@ inside ``d_s`` may not get closer.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import pybullet as pb
@@ -55,7 +54,14 @@ MIN_GRADIENT = 1e-4
 _WITNESS_ORDER: dict[str, dict[tuple[str, str], bool]] = {}
 """Per robot: :meth:`SelfClearance._witness_order` (found once per process)."""
 
-_WORLDS: dict[tuple[str, str], list[Any]] = {}
+
+@dataclass
+class _SharedWorld:
+    world: CellWorld
+    users: int = 0
+
+
+_WORLDS: dict[RobotModel, _SharedWorld] = {}
 """Per robot: one PyBullet world that every :class:`SelfClearance` of the process shares (each
 query sets the joints first), and how many instances use it. A world per instance would keep
 a PyBullet client (~30 MB) alive for every planner ever built, since planners are not closed."""
@@ -98,13 +104,12 @@ class SelfClearance:
             raise InvalidValueError("self_gain", "must lie in (0, 1]", gain)
         self.robot = robot
         self.influence, self.safety, self.gain = influence, safety, gain
-        self._key = (robot.name, str(robot.urdf_path))
-        shared = _WORLDS.get(self._key)
+        shared = _WORLDS.get(robot)
         if shared is None:
             arm = ArmSpec("self", robot, Pose())
-            shared = _WORLDS[self._key] = [CellWorld(Cell(f"self_{robot.name}", (arm,))), 0]
-        shared[1] += 1
-        self._world: CellWorld = shared[0]
+            shared = _WORLDS[robot] = _SharedWorld(CellWorld(Cell(f"self_{robot.name}", (arm,))))
+        shared.users += 1
+        self._world = shared.world
         self._closed = False
         self._client = self._world.client
         self._body = self._world.body("self")
@@ -178,10 +183,10 @@ class SelfClearance:
         if self._closed:
             return
         self._closed = True
-        shared = _WORLDS[self._key]
-        shared[1] -= 1
-        if shared[1] == 0:
-            del _WORLDS[self._key]
+        shared = _WORLDS[self.robot]
+        shared.users -= 1
+        if shared.users == 0:
+            del _WORLDS[self.robot]
             self._world.close()
 
     def _gradients(
