@@ -182,3 +182,53 @@ def test_settings_reject_bad_self_clearance_values() -> None:
         PlannerSettings(self_gain=0.0)
     assert PlannerSettings.preset("paper").self_clearance is False
     assert PlannerSettings().self_clearance is True
+
+
+@pytest.mark.parametrize("robot_name", ROBOTS)
+def test_the_lipschitz_bounds_hold_between_nearby_configurations(robot_name: str) -> None:
+    """|d(q) − d(q')| ≤ Σ_j bound_j·|q_j − q'_j| for every pair, on random nearby pairs of
+    configurations (distances read with a 2 m influence, so every pair has one)."""
+    far = SelfClearance(load_robot(robot_name), influence=2.0)
+    rng, checked = np.random.default_rng(11), 0
+    try:
+        for _ in range(150):
+            q = _random_q(far.robot, rng)
+            q2 = q + rng.uniform(-0.3, 0.3, size=far.robot.dof)
+            d, d2 = far.distances(q), far.distances(q2)
+            for p, (a, b, _, _) in enumerate(far._pairs):
+                if (a, b) in d and (a, b) in d2:
+                    bound = float(far._slope[p] @ np.abs(q2 - q))
+                    assert abs(d2[(a, b)] - d[(a, b)]) <= bound + 1e-6, (a, b)
+                    checked += 1
+    finally:
+        far.close()
+    assert checked > 1000
+
+
+@pytest.mark.parametrize("robot_name", ROBOTS)
+def test_pairs_skipped_by_their_bound_give_the_same_rows_as_asking_every_pair(
+    robot_name: str,
+) -> None:
+    """Along random walks (small steps, now and then a jump), the rows with the bound's skips
+    equal those of a fresh query of every pair; and most pair queries are skipped."""
+    robot = load_robot(robot_name)
+    skipping, exact = SelfClearance(robot), SelfClearance(robot)
+    rng = np.random.default_rng(3)
+    try:
+        skipping.queries, ticks = 0, 0
+        for _ in range(6):
+            q = _random_q(robot, rng)
+            for _ in range(40):
+                q = np.clip(q + rng.uniform(-0.04, 0.04, size=robot.dof), robot.lower, robot.upper)
+                if rng.random() < 0.05:
+                    q = _random_q(robot, rng)
+                exact._ref_q[:] = np.nan  # forget every earlier query: ask all pairs
+                got, want = skipping.rows(q), exact.rows(q)
+                assert got.pairs == want.pairs
+                np.testing.assert_array_equal(got.A, want.A)
+                np.testing.assert_array_equal(got.b, want.b)
+                ticks += 1
+        assert skipping.queries < 0.6 * ticks * len(skipping._pairs)
+    finally:
+        skipping.close()
+        exact.close()

@@ -114,10 +114,10 @@ PARAMS: dict[str, Param] = {
     "escape": Param(_PLANNER.escape, "stall escape and yield at the goal"),
     "fail_safe": Param(_PLANNER.fail_safe, "single | maximin: the fail-safe against one or all"),
     "fail_safe_slack": Param(
-        _PLANNER.fail_safe_slack,
-        "[m] maximin: how far below its best the worst pair may go to raise the next",
-        0.0,
-        1.0,
+        _PLANNER.fail_safe_slack, "[m] maximin: how far the worst pair may drop for the next", 0, 1
+    ),
+    "fail_safe_harm": Param(
+        _PLANNER.fail_safe_harm, "[m/s] maximin: fastest the arm may lower a critical V", 0, 100
     ),
     "exact_guard": Param(
         _PLANNER.exact_guard, "[m] exact clearance from peers holding at their goals (0: off)", 0, 1
@@ -207,6 +207,7 @@ class ArmPlannerNode(Node):
             escape=bool(p["escape"]),
             fail_safe=str(p["fail_safe"]),
             fail_safe_slack=float(p["fail_safe_slack"]),
+            fail_safe_harm=float(p["fail_safe_harm"]),
             hold_bound=float(p["hold_bound"]),
             hold_tolerance=float(p["hold_tolerance"]),
             exact_guard=float(p["exact_guard"]),

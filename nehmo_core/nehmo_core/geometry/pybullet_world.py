@@ -97,9 +97,10 @@ class CellWorld:
         """Pose one arm; ``q`` [rad] in the robot's joint order."""
         arm = self.cell.arm(arm_id)
         qv = arm.robot.check_q(q, f"q[{arm_id}]")
-        body = self._body[arm_id]
-        for j, v in zip(self._joint_index[arm_id], qv, strict=True):
-            pb.resetJointState(body, j, float(v), physicsClientId=self.client)
+        targets = [[v] for v in qv.tolist()]  # one call for every joint (each has one DoF)
+        pb.resetJointStatesMultiDof(
+            self._body[arm_id], self._joint_index[arm_id], targets, physicsClientId=self.client
+        )
         self._q[arm_id] = qv.copy()
 
     def _inertial(self, body: int) -> tuple[tuple[float, ...], tuple[float, ...]]:

@@ -55,16 +55,19 @@ def maximin_command(
     d_max: float | np.ndarray,
     values: np.ndarray | None = None,
     horizon: float = 0.1,
-    ridge: float = 1e-3,
     slack: float = 0.0,
+    harm: float | None = None,
+    ridge: float = 1e-3,
 ) -> np.ndarray:
     """The box-bounded command maximizing the smallest worst-case value ``horizon`` [s] ahead,
     then (lexicographically, within ``slack`` [m] of each stage's optimum) the next smallest.
 
     ``own_grads`` (k, n) and ``peer_grads`` (k, m) are the pairs' gradients of V, ``values``
     (k,) their values now (None: all equal, i.e. the smallest worst-case rate); ``d_max`` the
-    peers' speed bound, one for all or one per pair (k,). With one pair
-    it is ``ū·sign(g)`` (joints with a zero gradient stay still).
+    peers' speed bound, one for all or one per pair (k,). ``harm`` [m/s] (None: no limit)
+    bounds how fast the arm's own motion may lower any pair's V: ``g_i·u ≥ −harm`` for every
+    pair (``u = 0`` meets it, so the problem stays feasible). With one pair it is ``ū·sign(g)``
+    (joints with a zero gradient stay still).
     """
     own_grads = np.atleast_2d(np.asarray(own_grads, dtype=np.float64))
     peer_grads = np.atleast_2d(np.asarray(peer_grads, dtype=np.float64))
@@ -73,17 +76,20 @@ def maximin_command(
         return u_max * np.sign(own_grads[0])
     if not slack >= 0.0:
         raise InvalidValueError("slack", "must be >= 0 [m]", slack)
+    if harm is not None and not harm >= 0.0:
+        raise InvalidValueError("harm", "must be >= 0 [m/s] or None", harm)
     # predicted V_i = V_i + τ·(g_i·u − d̄‖h_i‖₁) = τ·(g_i·u − offset_i)
     offset = d_max * np.abs(peer_grads).sum(axis=1)
     if values is not None:
         offset = offset - np.asarray(values, dtype=np.float64) / horizon
     scale = float(np.abs(own_grads).max()) or 1.0  # the problem in units of the largest gradient
     g, offset = own_grads / scale, offset / scale  # rows: g_i·u − offset_i ≥ s (scaled rate)
+    limit = None if harm is None else harm / scale  # every pair: g_i·u ≥ −limit
     floor = np.full(k, np.nan)  # fixed pairs: g_i·u − offset_i ≥ floor_i
     free = np.ones(k, dtype=bool)
     u = np.zeros(n)
     while free.any():
-        stage, s = _maximin_stage(g, offset, free, floor, u_max, ridge)
+        stage, s = _maximin_stage(g, offset, free, floor, u_max, ridge, limit)
         if stage is None:  # cannot happen for this QP (the last stage's u is feasible); be safe
             worst = int(np.argmax(np.where(free, offset, -np.inf)))
             return u_max * np.sign(own_grads[worst])
@@ -106,8 +112,10 @@ def _maximin_stage(
     floor: np.ndarray,
     u_max: float,
     ridge: float,
+    limit: float | None = None,
 ) -> tuple[np.ndarray | None, float]:
-    """max s over (u, s): free rows g_i·u − offset_i ≥ s, fixed rows ≥ floor_i, |u| ≤ ū."""
+    """max s over (u, s): free rows g_i·u − offset_i ≥ s, fixed rows ≥ floor_i, |u| ≤ ū, and
+    (``limit`` given) every row g_i·u ≥ −limit."""
     n = g.shape[1]
     fixed = ~free
     bound = float(np.abs(g).sum(axis=1).max()) * u_max + float(np.abs(offset).max()) + 1.0
@@ -117,6 +125,9 @@ def _maximin_stage(
     linear[n] = -1.0
     jac = np.hstack([g, -free[:, None].astype(np.float64)])
     c = -offset - np.where(fixed, floor, 0.0)
+    if limit is not None:
+        jac = np.vstack([jac, np.hstack([g, np.zeros((len(g), 1))])])
+        c = np.concatenate([c, np.full(len(g), limit)])
     lo = np.concatenate([np.full(n, -u_max), [-bound]])
     hi = np.concatenate([np.full(n, u_max), [bound]])
     step = qp_step(hessian, linear, c, jac, lo, hi)

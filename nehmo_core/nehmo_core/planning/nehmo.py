@@ -320,7 +320,7 @@ class NehmoPlanner(StallEscape):
             values = now.values[chosen]
             d_max = s.d_max * now.bounds[chosen]
             return maximin_command(
-                own, peer, u_max, d_max, values, s.t_plan, slack=s.fail_safe_slack
+                own, peer, u_max, d_max, values, s.t_plan, s.fail_safe_slack, s.fail_safe_harm
             )
         critical = int(np.argmin(now.values))
         g = now.grads[critical][: self.robot.dof]

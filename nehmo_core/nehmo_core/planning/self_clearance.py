@@ -51,6 +51,11 @@ class SelfClearanceRows:
 MIN_GRADIENT = 1e-4
 """Rows whose ``|∂d/∂q|`` is below this [m/rad] in every joint are left out."""
 
+QUERY_REACH = 0.15
+"""[m] How far beyond the influence distance each pair is queried: a pair found farther than
+that, or with margin to spare, is not queried again until the joints have moved enough to
+bring it within the influence distance (see :meth:`SelfClearance._lipschitz`)."""
+
 _WITNESS_ORDER: dict[str, dict[tuple[str, str], bool]] = {}
 """Per robot: :meth:`SelfClearance._witness_order` (found once per process)."""
 
@@ -143,11 +148,59 @@ class SelfClearance:
                 self._moves[link] = moves
 
         self._last: tuple[np.ndarray, SelfClearanceRows] | None = None
+        # per pair: a bound on |∂d/∂q_j| everywhere, and the last query's joints and distance
+        self._slope = self._lipschitz(parent)
+        self._ref_q = np.full((len(self._pairs), len(ours)), np.nan)
+        self._ref_d = np.zeros(len(self._pairs))
+        self.queries = 0  # pair queries made (a pair skipped by its bound costs none)
         self._swapped = {(a, b): False for a, b, _, _ in self._pairs}
         if robot.name not in _WITNESS_ORDER:
             _WITNESS_ORDER[robot.name] = self._witness_order()
         self._swapped = _WITNESS_ORDER[robot.name]
         self._last = None  # rows computed while the order was being found
+
+    def _lipschitz(self, parent: dict[int, int]) -> np.ndarray:
+        """(pairs, dof): per link pair and joint, a bound [m/rad] on ``|∂d/∂q_j|`` over every
+        configuration, so that ``|d(q) − d(q')| ≤ Σ_j bound_j·|q_j − q'_j|``.
+
+        A joint that moves both links (or neither) leaves their distance alone. One that moves
+        only link ``a`` moves a point of it at most as fast as the point's distance from the
+        joint's origin: at most the chain of link-frame offsets from the joint to ``a`` (each is
+        fixed in its parent link) plus ``a``'s reach from its own frame, read from its
+        axis-aligned box at one configuration (the box holds the geometry, so the reach is not
+        underestimated). A prismatic joint moves any point at 1 m/m."""
+        client, body, ours = self._client, self._body, self._joints
+        links = range(pb.getNumJoints(body, physicsClientId=client))
+        q0 = np.clip(np.zeros(self.robot.dof), self.robot.lower, self.robot.upper)
+        self._world.set_joint_positions("self", q0)
+        frames = {
+            k: np.array(st[4])
+            for k, st in zip(
+                links,
+                pb.getLinkStates(body, list(links), True, physicsClientId=client),
+                strict=True,
+            )
+        }
+
+        def reach(joint: int, link: int) -> float:
+            lo, hi = (np.array(v) for v in pb.getAABB(body, link, physicsClientId=client))
+            corners = np.array(
+                [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+            )
+            out, k = float(np.linalg.norm(corners - frames[link], axis=1).max()), link
+            while k != joint:
+                out += float(np.linalg.norm(frames[k] - frames[parent[k]]))
+                k = parent[k]
+            return out
+
+        slope = np.zeros((len(self._pairs), len(ours)))
+        for p, (_, _, la, lb) in enumerate(self._pairs):
+            for k, j in enumerate(ours):
+                a, b = self._moves[la][k], self._moves[lb][k]
+                if a == b:
+                    continue
+                slope[p, k] = 1.0 if self._prismatic[k] else reach(j, la if a else lb)
+        return slope
 
     def _witness_order(self, samples: int = 60, seed: int = 0) -> dict[tuple[str, str], bool]:
         """Per link pair: whether PyBullet reports its witness points in swapped order.
@@ -255,13 +308,25 @@ class SelfClearance:
 
     def _rows(self, q: np.ndarray) -> SelfClearanceRows:
         n = self.robot.dof
+        # pairs whose distance cannot have come within the influence distance since their
+        # last query need no new one
+        since = np.abs(np.asarray(q, dtype=np.float64) - self._ref_q)
+        lower = self._ref_d - np.sum(self._slope * since, axis=1)  # NaN (never asked): ask
+        ask = np.flatnonzero(~(lower > self.influence))
+        if len(ask) == 0:
+            return _empty_rows(n)
         self._world.set_joint_positions("self", q)
         near = []  # (pair, d, p_a, p_b, normal from p_b to p_a) of the pairs within influence
-        for a, b_link, la, lb in self._pairs:
+        reach = self.influence + QUERY_REACH
+        self.queries += len(ask)
+        for i in ask:
+            a, b_link, la, lb = self._pairs[i]
             pts = pb.getClosestPoints(
-                self._body, self._body, self.influence, la, lb, physicsClientId=self._client
+                self._body, self._body, reach, la, lb, physicsClientId=self._client
             )
-            if not pts:
+            self._ref_q[i] = q
+            self._ref_d[i] = min((h[8] for h in pts), default=reach)
+            if self._ref_d[i] > self.influence:
                 continue
             p = min(pts, key=lambda h: h[8])
             if self._swapped[(a, b_link)]:

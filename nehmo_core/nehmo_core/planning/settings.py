@@ -70,6 +70,9 @@ class PlannerSettings:
     # the maximin fail-safe is lexicographic: it may lower the worst pair's predicted V by up to
     # fail_safe_slack [m] below its best to raise the next pairs' (0: plain maximin)
     fail_safe_slack: float = 0.005
+    # ... and its own motion may lower no critical pair's V faster than fail_safe_harm [m/s]
+    # (0: it never trades one peer for another; 100, above any rate: no limit)
+    fail_safe_harm: float = 0.0
     # announced speed bounds (not in the paper; planning/speed_bounds.py): an arm within
     # hold_tolerance [rad] (L2) of its goal announces hold_bound (a fraction of ū) and keeps its
     # commands within it until it leaves 2·hold_tolerance, gets a new goal or a peer breaks
@@ -155,6 +158,8 @@ class PlannerSettings:
             raise InvalidValueError("fail_safe_band", "must be >= 0 [m]", self.fail_safe_band)
         if not self.fail_safe_slack >= 0.0:
             raise InvalidValueError("fail_safe_slack", "must be >= 0 [m]", self.fail_safe_slack)
+        if not self.fail_safe_harm >= 0.0:
+            raise InvalidValueError("fail_safe_harm", "must be >= 0 [m/s]", self.fail_safe_harm)
         if not self.exact_guard >= 0.0:
             raise InvalidValueError("exact_guard", "must be >= 0 [m] (0: off)", self.exact_guard)
         if not self.self_safety >= 0.0:
