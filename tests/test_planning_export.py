@@ -242,6 +242,37 @@ def test_compiled_shipped_model_stores_each_weight_once_and_matches_the_vm(tmp_p
         np.testing.assert_allclose(np.asarray(g), np.asarray(g_ref), rtol=1e-10, atol=1e-12)
 
 
+
+@pytest.mark.parametrize("width", [0, 34])
+def test_single_precision_products_stay_within_1e6_of_the_double_ones(
+    width: int, tmp_path
+) -> None:
+    """The planner's default (``single=True``): the weight products in float. ``0``: the
+    shipped ``ur5_ur5`` model; ``34``: a random SIREN whose width is no multiple of the
+    transposed kernel's four-column step (its tail runs)."""
+    if width:
+        settings = NetworkSettings(width=width, hidden_layers=2)
+        vf = random_value_function("ur5_ur5", "bc+sym", settings, residual_scale=1.0, seed=4)
+    else:
+        vf = load_value_function("ur5_ur5", variant="bc+sym")
+    _, value_grad = value_functions(vf, f"single_{width}")
+    compacted, counts = codegen.compact_weights(_source(value_grad, tmp_path), single=True)
+    assert "float acc = 0;" in compacted and counts["removed"] >= 1
+    if width:
+        assert re.search(rf"nehmo_rowt_f32\(w\d+, {width}, casadi_c", compacted)
+    single = compile_function(value_grad, "compiled", single=True)
+    double = compile_function(value_grad, "compiled")
+    assert single.library != double.library
+    worst_v = worst_g = 0.0
+    for tau, xi in zip((0.0, 0.06, 0.3, 0.6) * 10, _states(12, 40, 9), strict=True):
+        (v, g), (v_ref, g_ref) = single.function(tau, xi), double.function(tau, xi)
+        worst_v = max(worst_v, abs(float(v) - float(v_ref)))
+        worst_g = max(worst_g, float(np.abs(np.asarray(g) - np.asarray(g_ref)).max()))
+    assert worst_v < 1e-6 and worst_g < 1e-6
+    assert worst_v > 0.0  # the float kernels ran (the double ones agree to ~1e-14)
+    model = PairValueModel.from_value_function(vf, f"single_{width}")
+    assert model.library == single.library  # what a planner evaluates
+
 def _transcendental_fn(name: str) -> ca.Function:
     x = ca.MX.sym("x", 64)
     y = ca.sum1(ca.sin(3.0 * x) * ca.exp(-x * x) + ca.cos(x))

@@ -62,9 +62,15 @@ class PairValueModel:
 
     @classmethod
     def from_value_function(
-        cls, value_function: ValueFunction, name: str = "pair_value", backend: str = "auto"
+        cls,
+        value_function: ValueFunction,
+        name: str = "pair_value",
+        backend: str = "auto",
+        single: bool = True,
     ) -> PairValueModel:
         """Export ``value_function`` (an arm-pair system with a learned-distance boundary).
+        ``single``: the generated C's weight products in float (faster, ``V`` within ~1e-8;
+        :mod:`~nehmo_core.planning.codegen`); ``False`` keeps them in double.
 
         The pair geometry comes from the distance: as trained for a plain distance; with the
         robots exchanged and the inverse base offset for a swapped one (``kinova_ur5``). A
@@ -97,7 +103,7 @@ class PairValueModel:
             robots, base = (cfg.robot2, cfg.robot1), inverse_pose(base2)
             dofs = (distance.n2, distance.n1)
         value, value_grad = value_functions(value_function, name)
-        compiled = compile_function(value_grad, backend)
+        compiled = compile_function(value_grad, backend, single=single)
         return cls(
             name=name,
             robot1=robots[0],
