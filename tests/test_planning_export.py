@@ -242,11 +242,8 @@ def test_compiled_shipped_model_stores_each_weight_once_and_matches_the_vm(tmp_p
         np.testing.assert_allclose(np.asarray(g), np.asarray(g_ref), rtol=1e-10, atol=1e-12)
 
 
-
 @pytest.mark.parametrize("width", [0, 34])
-def test_single_precision_products_stay_within_1e6_of_the_double_ones(
-    width: int, tmp_path
-) -> None:
+def test_single_precision_products_stay_within_1e6_of_the_double_ones(width: int, tmp_path) -> None:
     """The planner's default (``single=True``): the weight products in float. ``0``: the
     shipped ``ur5_ur5`` model; ``34``: a random SIREN whose width is no multiple of the
     transposed kernel's four-column step (its tail runs)."""
@@ -272,6 +269,7 @@ def test_single_precision_products_stay_within_1e6_of_the_double_ones(
     assert worst_v > 0.0  # the float kernels ran (the double ones agree to ~1e-14)
     model = PairValueModel.from_value_function(vf, f"single_{width}")
     assert model.library == single.library  # what a planner evaluates
+
 
 def _transcendental_fn(name: str) -> ca.Function:
     x = ca.MX.sym("x", 64)
