@@ -51,10 +51,12 @@ class SelfClearanceRows:
 MIN_GRADIENT = 1e-4
 """Rows whose ``|∂d/∂q|`` is below this [m/rad] in every joint are left out."""
 
-QUERY_REACH = 0.15
+QUERY_REACH = 0.5
 """[m] How far beyond the influence distance each pair is queried: a pair found farther than
 that, or with margin to spare, is not queried again until the joints have moved enough to
-bring it within the influence distance (see :meth:`SelfClearance._lipschitz`)."""
+bring it within the influence distance (see :meth:`SelfClearance._lipschitz`). On the UR5's
+closed-loop joint paths of the planning-speed bench, 0.5 m asks 5.4 pairs per step against 7.7
+at 0.15 m (a pair out of reach reads as at the reach, so a short reach brings it back soon)."""
 
 _WITNESS_ORDER: dict[str, dict[tuple[str, str], bool]] = {}
 """Per robot: :meth:`SelfClearance._witness_order` (found once per process)."""
