@@ -49,8 +49,9 @@ class PlannerSettings:
     certified_epsilon: bool = True
     # with certified margins, the floor [m] of rows against a peer that announced a speed bound:
     # they keep min(raised epsilon, max(settled_epsilon, their model's δ at hold_bound·t_safe));
-    # 2 cm with the exact guard (0.05 m before it: a learned distance may read 3 cm at contact)
-    settled_epsilon: float = 0.02
+    # 1 cm, the exact guard's gap (0.05 m before the guard: a learned distance may read 3 cm at
+    # contact; 2 cm until five-UR5 goal sets 1-2 cm apart were seen to end stuck)
+    settled_epsilon: float = 0.01
     t_plan: float = 0.1  # planning horizon: the command is held this long
     t_safe: float = 0.3  # time-to-go at which V must stay ≥ epsilon after the step
     u_max: float = 0.5  # ū: own joint speed bound
