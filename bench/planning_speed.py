@@ -10,9 +10,10 @@ of the arm with that many peers: median, p95 and max of the plan() wall time, so
 and fail-safe rate; the time of one batched ``V``/``∇V`` evaluation of all its peers (the floor
 any solver pays at least once per step) and the ratio to it; CHOMP's centralized plan time on the
 same scenarios and its ratio to NeHMO's per-step time; and IPOPT (the authors' solver) per step
-on the dual cell for reference. The generated C stores each weight matrix once, as float
-(``codegen.compact_weights``); the same evaluation with CasADi's own layout (every matrix twice,
-as double) runs beside it, as a floor per peer count and as a full ``nehmo`` row on the dual
+on the dual cell for reference. The generated C stores each weight matrix once, as float, and
+multiplies through it in float (``codegen.compact_weights``, the planner's default); the same
+evaluation with CasADi's own layout (every matrix twice, as double, double products) runs beside
+it, as a floor per peer count and as a full ``nehmo`` row on the dual
 cell (``nehmo, CasADi layout``).
 
 Value model: the shipped ``ur5_ur5`` ``bc+sym`` value function (``--model random`` for a

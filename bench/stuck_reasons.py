@@ -6,8 +6,8 @@ Read from the episode logs of the ``nehmo`` rows (``bench/results/fresh/seed<S>/
 where those runs wrote them). For each stuck episode, with exact PyBullet distances:
 
 - ``goals closer than the floor``: with every arm at its goal, some pair is closer than the floor
-  against settled peers (``settled_epsilon``, 2 cm; 5 cm up to seeds 39 and 40), so no planner
-  that keeps it can finish exactly;
+  against settled peers (``settled_epsilon``: 1 cm; 2 cm when seeds 41 and 42 ran, 5 cm up to
+  seed 40), so no planner that keeps it can finish exactly;
 - ``blocked by a settled peer``: at the end an arm is within ``hold_tolerance`` of its goal
   (settled) and a peer still far from its own (> 0.1 rad) is within 0.2 m of it;
 - ``mutual block``: no arm near a stalled arm is settled, but two arms are within 0.2 m;
