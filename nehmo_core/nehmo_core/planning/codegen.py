@@ -72,7 +72,7 @@ CFLAGS = (
     "-fPIC",
     "-shared",
 )
-_CODEGEN_VERSION = "5"
+_CODEGEN_VERSION = "6"
 
 _DENSE_KERNEL_HEAD = "void casadi_mtimes_dense(const casadi_real* x, casadi_int nrow_x"
 _DENSE_KERNEL = (
@@ -174,6 +174,25 @@ COMPACT_MIN_SIZE = 1024
 """Constants with fewer entries are left as doubles (a few KB: not worth a kernel call)."""
 
 _CONST = re.compile(r"static const casadi_real (casadi_c\d+)\[(\d+)\] = \s*\{([^}]*)\};\n")
+_ROWT_KERNEL = """
+/* z (1 x m) += x (1 x n) * A^T, A (m x n) column-major in float; REAL: the arithmetic */
+static void nehmo_rowt_f32(const casadi_real* x, casadi_int n, const float* a, casadi_int m,
+    casadi_real* z) {
+  REAL acc[NEHMO_ROWT_MAX];
+  casadi_int i, k;
+  for (i = 0; i < m; ++i) acc[i] = 0;
+  for (k = 0; k + 4 <= n; k += 4) { /* four columns per pass over acc */
+    const float *c0 = a + k*m, *c1 = c0 + m, *c2 = c1 + m, *c3 = c2 + m;
+    REAL x0 = (REAL)x[k], x1 = (REAL)x[k+1], x2 = (REAL)x[k+2], x3 = (REAL)x[k+3];
+    for (i = 0; i < m; ++i) acc[i] += x0*c0[i] + x1*c1[i] + x2*c2[i] + x3*c3[i];
+  }
+  for (; k < n; ++k) {
+    REAL xk = (REAL)x[k];
+    for (i = 0; i < m; ++i) acc[i] += xk*a[k*m + i];
+  }
+  for (i = 0; i < m; ++i) z[i] += acc[i];
+}
+"""
 _ROW_KERNELS = """
 /* z (1 x m) += x (1 x n) * Y, Y (n x m) column-major in float: 8 columns at a time */
 static void nehmo_row_f32(const casadi_real* x, casadi_int n, const float* y, casadi_int m,
@@ -196,57 +215,21 @@ static void nehmo_row_f32(const casadi_real* x, casadi_int n, const float* y, ca
     z[i] += acc;
   }
 }
-
-/* z (1 x m) += x (1 x n) * A^T, A (m x n) column-major in float */
-static void nehmo_rowt_f32(const casadi_real* x, casadi_int n, const float* a, casadi_int m,
-    casadi_real* z) {
-  casadi_real acc[NEHMO_ROWT_MAX];
-  casadi_int i, k;
-  for (i = 0; i < m; ++i) acc[i] = 0;
-  for (k = 0; k < n; ++k) {
-    const float* c = a + k*m;
-    casadi_real xk = x[k];
-    for (i = 0; i < m; ++i) acc[i] += xk*c[i];
-  }
-  for (i = 0; i < m; ++i) z[i] += acc[i];
-}
-"""
+""" + _ROWT_KERNEL.replace("REAL", "casadi_real")
 _ROW_KERNELS_SINGLE = """
-/* the same two products, multiplied and summed in float (x rounded to float first) */
+/* the same products, multiplied and summed in float (x rounded to float first) */
 static void nehmo_row_f32(const casadi_real* x, casadi_int n, const float* y, casadi_int m,
     casadi_real* z) {
   float xf[NEHMO_ROW_MAX];
   casadi_int i, k;
   for (k = 0; k < n; ++k) xf[k] = (float)x[k];
   for (i = 0; i < m; ++i) {
-    const float* c = y + i*n;
     float acc = 0;
-    for (k = 0; k < n; ++k) acc += xf[k]*c[k];
+    for (k = 0; k < n; ++k) acc += xf[k]*y[k + i*n];
     z[i] += acc;
   }
 }
-
-static void nehmo_rowt_f32(const casadi_real* x, casadi_int n, const float* a, casadi_int m,
-    casadi_real* z) {
-  float acc[NEHMO_ROWT_MAX];
-  casadi_int i, k;
-  for (i = 0; i < m; ++i) acc[i] = 0;
-  for (k = 0; k + 4 <= n; k += 4) { /* four columns per pass over acc */
-    const float* c0 = a + k*m;
-    const float* c1 = c0 + m;
-    const float* c2 = c1 + m;
-    const float* c3 = c2 + m;
-    float x0 = (float)x[k], x1 = (float)x[k+1], x2 = (float)x[k+2], x3 = (float)x[k+3];
-    for (i = 0; i < m; ++i) acc[i] += x0*c0[i] + x1*c1[i] + x2*c2[i] + x3*c3[i];
-  }
-  for (; k < n; ++k) {
-    const float* c = a + k*m;
-    float xk = (float)x[k];
-    for (i = 0; i < m; ++i) acc[i] += xk*c[i];
-  }
-  for (i = 0; i < m; ++i) z[i] += acc[i];
-}
-"""
+""" + _ROWT_KERNEL.replace("REAL", "float")
 
 
 @dataclass(frozen=True)
