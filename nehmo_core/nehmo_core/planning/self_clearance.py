@@ -326,11 +326,11 @@ class SelfClearance:
             pts = pb.getClosestPoints(
                 self._body, self._body, reach, la, lb, physicsClientId=self._client
             )
+            p = min(pts, key=lambda h: h[8], default=None)  # the closest point pair
             self._ref_q[i] = q
-            self._ref_d[i] = min((h[8] for h in pts), default=reach)
-            if self._ref_d[i] > self.influence:
+            self._ref_d[i] = reach if p is None else p[8]
+            if p is None or p[8] > self.influence:
                 continue
-            p = min(pts, key=lambda h: h[8])
             if self._swapped[(a, b_link)]:
                 near.append(((a, b_link, la, lb), p[8], p[6], p[5], [-v for v in p[7]]))
             else:
