@@ -8,7 +8,7 @@ import pytest
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.exact_guard import guard_step
+from nehmo_core.planning.exact_guard import closer_than, guard_step
 from nehmo_core.planning.models import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.settings import PlannerSettings
@@ -97,3 +97,32 @@ def test_a_step_that_opens_the_gap_passes_even_below_the_floor(world: CellWorld)
     step = 0.5 / np.abs(toward).max()  # full speed on the largest joint
     assert guard_step(CELL, OWN, goal, away * step, {PEER: peer}, settings) == 1.0
     assert guard_step(CELL, OWN, goal, toward * step, {PEER: peer}, settings) < 1.0
+
+
+def test_a_holding_arm_withdraws_from_a_full_speed_peer_within_the_floor(
+    world: CellWorld, models: list
+) -> None:
+    """The learned V under the settled margin can read high enough at 1–2 cm that a pressing
+    peer never counts as a threat; the real geometry makes it one."""
+    rng = np.random.default_rng(7)
+    kept_without = 0
+    poses = 0
+    for _ in range(4000):
+        peer, q = rng.uniform(-1.5, 1.5, 6), rng.uniform(-1.5, 1.5, 6)
+        world.set_configuration({OWN: q, PEER: peer})
+        if not 0.005 < world.distance(OWN, PEER) < FLOOR or _folded(world):
+            continue
+        assert closer_than(CELL, OWN, q, {PEER: peer}, FLOOR)
+        assert not closer_than(CELL, OWN, q, {PEER: peer}, 0.004)
+        bounds = []
+        for guard in (0.0, FLOOR):
+            settings = PlannerSettings(settled_epsilon=1e-3, exact_guard=guard, deadline=3600.0)
+            planner = NehmoPlanner(CELL, OWN, models, settings)
+            # at its goal, beside a peer that announces full speed
+            bounds.append(planner.plan(q, {PEER: peer}, q, {PEER: 1.0}).telemetry.speed_bound)
+        assert bounds[1] == 1.0  # withdrawn
+        kept_without += bounds[0] < 1.0
+        poses += 1
+        if poses == 4:
+            break
+    assert poses == 4 and kept_without >= 1

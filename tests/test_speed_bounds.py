@@ -77,6 +77,28 @@ def test_an_arm_at_its_goal_announces_and_keeps_its_bound(models: list) -> None:
     assert caps[2][1] == pytest.approx(0.5)
 
 
+def test_an_arm_pushed_off_its_goal_keeps_its_bound_until_hold_release(models: list) -> None:
+    settings = PlannerSettings(hold_bound=0.2, hold_release=0.3, deadline=3600.0)
+    planner = NehmoPlanner(CELL, OWN, models, settings)
+    goal = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
+    far = {PEER: goal.copy()}  # both arms turned away: no peer presses
+    push = np.array([1.0, -1.0, 1.0, 0.5, 0.0, 0.0]) / np.linalg.norm([1.0, -1.0, 1.0, 0.5])
+    seen = []
+    for off in (0.0, 0.15, 0.29, 0.31, 0.15, 0.04):
+        result = planner.plan(goal + off * push, far, goal)
+        seen.append(result.telemetry.speed_bound)
+        if result.telemetry.speed_bound < 1.0:
+            assert np.abs(result.velocity).max() <= 0.2 * 0.5 + 1e-12
+    # kept beyond twice the tolerance (0.1 rad), withdrawn beyond 0.3 rad, and made anew only
+    # back within the tolerance
+    assert seen == [0.2, 0.2, 0.2, 1.0, 1.0, 0.2]
+
+
+def test_a_release_inside_the_hold_tolerance_is_rejected() -> None:
+    with pytest.raises(InvalidValueError, match=r"hold_release.*hold_tolerance.*0\.02"):
+        PlannerSettings(hold_release=0.02)
+
+
 def _pushing_states(planner: NehmoPlanner, bound: float, count: int) -> list[tuple]:
     """Collision-free states near contact, and goals that push the own arm into the peer."""
     rng = np.random.default_rng(7)

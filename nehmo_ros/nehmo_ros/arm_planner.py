@@ -128,6 +128,9 @@ PARAMS: dict[str, Param] = {
     "hold_tolerance": Param(
         _PLANNER.hold_tolerance, "[rad] goal distance within which hold_bound is announced"
     ),
+    "hold_release": Param(
+        _PLANNER.hold_release, "[rad] goal distance beyond which a holding arm withdraws its bound"
+    ),
     "deadline": Param(0.0, "[s] solve budget; 0: 75 % of the period", 0.0, 10.0),
     "peer_timeout": Param(
         _CONTROL.peer_timeout, "[s] a joint state older than this is stale", 0.0, 60.0
@@ -193,25 +196,9 @@ class ArmPlannerNode(Node):
             jump_margin=float(p["jump_margin"]),
         )
         fault = parse_fault(str(p["fault_injection"]))
-        settings = PlannerSettings(
-            epsilon=float(p["epsilon"]),
-            certified_epsilon=bool(p["certified_epsilon"]),
-            settled_epsilon=float(p["settled_epsilon"]),
-            t_plan=float(p["t_plan"]),
-            t_safe=float(p["t_safe"]),
-            u_max=float(p["u_max"]),
-            d_max=float(p["d_max"]),
-            solver=p["solver"],
-            deadline=deadline,
-            self_clearance=bool(p["self_clearance"]),
-            escape=bool(p["escape"]),
-            fail_safe=str(p["fail_safe"]),
-            fail_safe_slack=float(p["fail_safe_slack"]),
-            fail_safe_harm=float(p["fail_safe_harm"]),
-            hold_bound=float(p["hold_bound"]),
-            hold_tolerance=float(p["hold_tolerance"]),
-            exact_guard=float(p["exact_guard"]),
-        )
+        # every node parameter named like a planner setting sets it, converted to its type
+        given = {k: type(v)(p[k]) for k, v in vars(_PLANNER).items() if k in p and k != "deadline"}
+        settings = PlannerSettings(**given, deadline=deadline)
         planner = build_planner(
             p["planner"], self.cell, arm_id, p["model"], settings, bool(p["allow_unmodelled"])
         )

@@ -25,7 +25,7 @@ from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
-__all__ = ["GUARD_NEAR", "guard_step", "prepare"]
+__all__ = ["GUARD_NEAR", "closer_than", "guard_step", "prepare"]
 
 GUARD_NEAR = 0.15
 """Only peers whose ``V`` now reads below this [m] are checked (the learned values err by a few
@@ -79,3 +79,18 @@ def guard_step(
         if min(ends) >= min(floor, now):
             return scale
     return 0.0
+
+
+def closer_than(
+    cell: Cell, arm_id: str, q: np.ndarray, peers: Mapping[str, np.ndarray], floor: float
+) -> bool:
+    """Whether arm ``arm_id`` at ``q`` is closer than ``floor`` [m] to a peer of ``peers``
+    (``{peer: q}``), with the real geometry. A holding arm withdraws from a peer that brought
+    it there: the learned V under the settled margin can read 1–3 cm at contact, so a peer
+    pressing at that margin while the holding arm's bounded fail-safe cannot get away (it sits
+    between two) would otherwise never count as a threat."""
+    if not peers or floor <= 0.0:
+        return False
+    world = _world(cell)
+    world.set_configuration({**peers, arm_id: q})
+    return min(world.distance(arm_id, p, 2.0 * floor) for p in peers) < floor

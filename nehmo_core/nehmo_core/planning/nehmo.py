@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.planning.exact_guard import GUARD_NEAR, guard_step, prepare
+from nehmo_core.planning.exact_guard import GUARD_NEAR, closer_than, guard_step, prepare
 from nehmo_core.planning.fail_safe import MaximinFailSafe, maximin_command
 from nehmo_core.planning.interface import (
     PlanResult,
@@ -184,12 +184,12 @@ class NehmoPlanner(StallEscape):
         participants: frozenset[str],
     ) -> float:
         """This command's announcement (a fraction of ū; see :mod:`.speed_bounds`): hold_bound
-        from within hold_tolerance of the goal until beyond twice that, or until a peer breaks
+        from within hold_tolerance of the goal until beyond hold_release, or until a peer breaks
         the slow game (:meth:`_threatened`), else full speed."""
         s = self.settings
         if s.hold_bound < FULL_SPEED:
             e = float(np.linalg.norm(error0))
-            if e > 2.0 * s.hold_tolerance or self._threatened(q, peers, bounds, participants):
+            if e > s.hold_release or self._threatened(q, peers, bounds, participants):
                 self._holding = False
             elif e <= s.hold_tolerance:
                 self._holding = True
@@ -204,13 +204,11 @@ class NehmoPlanner(StallEscape):
         bounds: Mapping[str, float],
         participants: frozenset[str],
     ) -> bool:
-        """Whether a peer at full speed has broken the slow game with this arm near its goal.
-
-        A participant (a peer that announces, :mod:`.speed_bounds`) plans against this arm's
-        bound ``k = hold_bound`` and keeps ``V(k·t_safe)`` at or above its settled margin, so
-        also ``V(k·t_plan)`` up to its linearization error: it breaks the game only below half
-        that margin. A peer that announces nothing (a reckless arm) breaks it below ε. Either
-        is fled from at full speed, after the withdrawal."""
+        """Whether a peer at full speed has broken the slow game with this arm near its goal:
+        a participant (it plans against this arm's bound ``k`` and keeps ``V(k·t_safe)`` at its
+        settled margin) brings ``V(k·t_plan)`` below half that margin, a peer that announces
+        nothing below ε, or either comes within ``exact_guard`` of the real geometry. Either
+        is fled from at full speed, after the withdrawal (:mod:`.speed_bounds`)."""
         s = self.settings
         ids = [p for p in self.pairs if bounds[p] >= FULL_SPEED]
         if not ids:
@@ -218,7 +216,10 @@ class NehmoPlanner(StallEscape):
         slow = self._evaluate_current(q, peers, ids, dict.fromkeys(ids, s.hold_bound))
         half = [0.5 * self.group_margin(self.pairs[p].model_index, s.hold_bound) for p in ids]
         floor = [h if p in participants else s.epsilon for p, h in zip(ids, half, strict=True)]
-        return bool(np.any(slow.values < np.array(floor)))
+        near = {p: peers[p] for p, v in zip(ids, slow.values, strict=True) if v < GUARD_NEAR}
+        return bool(np.any(slow.values < np.array(floor))) or (
+            closer_than(self.cell, self.arm_id, q, near, s.exact_guard)
+        )
 
     @property
     def announcement(self) -> float:
@@ -422,8 +423,7 @@ class NehmoPlanner(StallEscape):
             self._warm = result.y
             if result.hessian is not None:
                 self._hessian = result.hessian
-            n_value = len(now.ids)  # the V rows come first; self-clearance rows follow
-            value_rows = result.constraint[:n_value]
+            value_rows = result.constraint[: len(now.ids)]  # V rows first, then self-clearance
             min_constraint = float(value_rows.min()) if len(value_rows) else math.nan
             fail_safe = False
         else:

@@ -76,12 +76,15 @@ class PlannerSettings:
     fail_safe_harm: float = 0.0
     # announced speed bounds (not in the paper; planning/speed_bounds.py): an arm within
     # hold_tolerance [rad] (L2) of its goal announces hold_bound (a fraction of ū) and keeps its
-    # commands within it until it leaves 2·hold_tolerance, gets a new goal or a peer breaks
+    # commands within it until it leaves hold_release, gets a new goal or a peer breaks
     # V(hold_bound·t_plan) ≥ ε with it (half its settled margin for a peer that announces),
     # announcing the withdrawal bound_release_ticks commands ahead; peers that keep their
     # announcement are planned against V(k·t_safe). hold_bound = 1: announce nothing (the paper)
     hold_bound: float = 0.2
     hold_tolerance: float = 0.05
+    # a holding arm pushed off its goal keeps its bound up to hold_release [rad] (L2) from it, so
+    # the pushing peer can pass; 2·hold_tolerance withdrew it early and both arms fled in turns
+    hold_release: float = 0.4
     bound_release_ticks: int = 2
     # commands are shortened so that the arm's real geometry (PyBullet) stays exact_guard [m]
     # from every peer that holds at its goal under an announced bound (planning/exact_guard.py;
@@ -107,6 +110,7 @@ class PlannerSettings:
     stall_progress: float = 0.1
     stall_margin: float = 0.01
     escape_seed: int = 0
+    escape_retreat: float = 0.0  # escape direction: tangent (unit) + this times the unit ∇V
     backend: str = "auto"  # evaluation of V, ∇V: generated C ("compiled") or CasADi's "vm"
     # SQP
     sqp_max_iter: int = 30
@@ -155,6 +159,12 @@ class PlannerSettings:
             )
         if not self.hold_tolerance > 0.0:
             raise InvalidValueError("hold_tolerance", "must be > 0 [rad]", self.hold_tolerance)
+        if not self.hold_release >= self.hold_tolerance:
+            raise InvalidValueError(
+                "hold_release",
+                f"must be >= hold_tolerance ({self.hold_tolerance}) [rad]",
+                self.hold_release,
+            )
         if not self.fail_safe_band >= 0.0:
             raise InvalidValueError("fail_safe_band", "must be >= 0 [m]", self.fail_safe_band)
         if not self.fail_safe_slack >= 0.0:
@@ -171,7 +181,7 @@ class PlannerSettings:
             )
         if not 0.0 < self.self_gain <= 1.0:
             raise InvalidValueError("self_gain", "must lie in (0, 1]", self.self_gain)
-        for name in ("stall_progress", "stall_margin"):
+        for name in ("stall_progress", "stall_margin", "escape_retreat"):
             if not getattr(self, name) >= 0:
                 raise InvalidValueError(name, "must be >= 0", getattr(self, name))
         if not self.reach_margin >= 0:

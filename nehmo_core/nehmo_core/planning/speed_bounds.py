@@ -14,12 +14,13 @@ already trained (``V(0, x) = l(x)``: a peer that holds still is as far as it is)
 The promise is made by a NeHMO arm that has settled at its goal (:class:`NehmoPlanner` with
 ``hold_bound < 1``): it announces ``k = hold_bound`` with every command and keeps its own
 commands within ``k·ū`` from then on, including its fail-safe. A withdrawal (a new goal,
-drifting beyond ``2·hold_tolerance``, or a threat) is announced ``release_ticks`` commands before
+drifting beyond ``hold_release``, or a threat) is announced ``release_ticks`` commands before
 the arm moves faster, so peers hear it before it matters. The threat: a NeHMO peer (one that
 announces, even only full speed) plans against the settled arm's bound and so keeps
 ``V(k·t_safe)`` at or above its settled margin with it; it is a threat only when it brings
 ``V(k·t_plan)`` below half that margin (beyond what its linearized steps can explain). A peer
 that announces nothing is a threat as soon as it brings ``V(k·t_plan)`` below ε (a reckless arm).
+Either is a threat within ``exact_guard`` of the real geometry (:func:`.exact_guard.closer_than`).
 Either way the settled arm withdraws to flee at full speed. The price that remains: the two
 commands before the arm may speed up.
 
