@@ -110,7 +110,6 @@ class PlannerSettings:
     stall_progress: float = 0.1
     stall_margin: float = 0.01
     escape_seed: int = 0
-    escape_retreat: float = 0.0  # escape direction: tangent (unit) + this times the unit ∇V
     backend: str = "auto"  # evaluation of V, ∇V: generated C ("compiled") or CasADi's "vm"
     # SQP
     sqp_max_iter: int = 30
@@ -181,7 +180,7 @@ class PlannerSettings:
             )
         if not 0.0 < self.self_gain <= 1.0:
             raise InvalidValueError("self_gain", "must lie in (0, 1]", self.self_gain)
-        for name in ("stall_progress", "stall_margin", "escape_retreat"):
+        for name in ("stall_progress", "stall_margin"):
             if not getattr(self, name) >= 0:
                 raise InvalidValueError(name, "must be >= 0", getattr(self, name))
         if not self.reach_margin >= 0:

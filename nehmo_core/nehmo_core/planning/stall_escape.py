@@ -65,8 +65,6 @@ class StallEscape:
             gg = float(g @ g)
             if gg > 1e-12:
                 d = d - (d @ g) / gg * g
-                if self.settings.escape_retreat > 0.0:
-                    d = d / (np.linalg.norm(d) or 1.0) + self.settings.escape_retreat * g / gg**0.5
         peak = float(np.abs(d).max())
         if peak < 1e-9:
             return np.zeros(self.robot.dof)
