@@ -49,6 +49,7 @@ import math
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import fields
 from typing import Any
 
 import rclpy
@@ -120,7 +121,10 @@ PARAMS: dict[str, Param] = {
         _PLANNER.fail_safe_harm, "[m/s] maximin: fastest the arm may lower a critical V", 0, 100
     ),
     "exact_guard": Param(
-        _PLANNER.exact_guard, "[m] exact clearance from peers holding at their goals (0: off)", 0, 1
+        _PLANNER.exact_guard,
+        "[m] exact clearance to holding peers, threat distance when holding (0: off)",
+        0,
+        1,
     ),
     "hold_bound": Param(
         _PLANNER.hold_bound, "speed bound announced at the goal, share of u_max (1: none)", 0.0, 1.0
@@ -197,7 +201,8 @@ class ArmPlannerNode(Node):
         )
         fault = parse_fault(str(p["fault_injection"]))
         # every node parameter named like a planner setting sets it, converted to its type
-        given = {k: type(v)(p[k]) for k, v in vars(_PLANNER).items() if k in p and k != "deadline"}
+        named = [f.name for f in fields(PlannerSettings) if f.name in p and f.name != "deadline"]
+        given = {k: type(getattr(_PLANNER, k))(p[k]) for k in named}
         settings = PlannerSettings(**given, deadline=deadline)
         planner = build_planner(
             p["planner"], self.cell, arm_id, p["model"], settings, bool(p["allow_unmodelled"])

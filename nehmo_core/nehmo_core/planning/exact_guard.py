@@ -8,7 +8,7 @@ peer's current pose with PyBullet. A step that would bring the arms closer than
 ``exact_guard`` [m] is shortened (to ½, ¼ of it, or nothing) until it does not, unless the
 arms are already closer and the step does not bring them closer still. The peer's own motion
 within its bound is left to the value rows; a peer that breaks its bound is fled from by the
-threat test as before.
+threat test, which checks the real geometry too (:func:`closer_than`).
 
 One PyBullet world per cell is shared by the planners of a process (the two most recent cells
 are kept; the planners of an older cell get a fresh one if they plan again).

@@ -189,7 +189,8 @@ class NehmoPlanner(StallEscape):
         s = self.settings
         if s.hold_bound < FULL_SPEED:
             e = float(np.linalg.norm(error0))
-            if e > s.hold_release or self._threatened(q, peers, bounds, participants):
+            live = self._holding or e <= s.hold_tolerance  # else the threat test cannot matter
+            if e > s.hold_release or (live and self._threatened(q, peers, bounds, participants)):
                 self._holding = False
             elif e <= s.hold_tolerance:
                 self._holding = True
@@ -306,9 +307,8 @@ class NehmoPlanner(StallEscape):
     def _fail_safe(
         self, now: _Peers, rows: SelfClearanceRows | None = None, cap: float = FULL_SPEED
     ) -> np.ndarray:
-        return self._within_self_clearance(
-            self._hji_fail_safe(now, cap * self.settings.u_max), rows
-        )
+        u = self._hji_fail_safe(now, cap * self.settings.u_max)
+        return self._within_self_clearance(u, rows)
 
     def _hji_fail_safe(self, now: _Peers, u_max: float) -> np.ndarray:
         s, n1 = self.settings, self.robot.dof

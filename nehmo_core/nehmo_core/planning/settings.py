@@ -87,8 +87,8 @@ class PlannerSettings:
     hold_release: float = 0.4
     bound_release_ticks: int = 2
     # commands are shortened so that the arm's real geometry (PyBullet) stays exact_guard [m]
-    # from every peer that holds at its goal under an announced bound (planning/exact_guard.py;
-    # 0: off)
+    # from every peer that holds at its goal under an announced bound, and a holding arm flees a
+    # full-speed peer closer than that (planning/exact_guard.py; 0: both off)
     exact_guard: float = 0.01
     # self-collision velocity dampers on the step and the fail-safe (not in the paper's Opt):
     # link pairs closer than self_influence [m] may close at most self_gain of their distance
