@@ -42,6 +42,10 @@ SEED_NOTES: dict[int, str] = {
     "from silent ones (`../options/certified_margins.md`), with every row at that code; seeds "
     "34–37 (`seed34/` … `seed37/`) are of the code before it. Seed 38 is left out: its one "
     "three-UR5 collision with a 2 cm settled floor was read to keep the floor at 5 cm",
+    45: "Seed 45's stuck three-UR5 episodes were read (logs only, no change made) before the "
+    "hold release; that change was found and tuned on development seeds 30 and 31 "
+    "(`../options/README.md`). Seeds 43, 44 and 45 were rerun at its code",
+    46: "Seed 46 was first run at the hold release's code",
 }
 
 
