@@ -45,7 +45,7 @@ SEED_NOTES: dict[int, str] = {
     45: "Seed 45's stuck three-UR5 episodes were read (logs only, no change made) before the "
     "hold release; that change was found and tuned on development seeds 30 and 31 "
     "(`../options/README.md`). Seeds 43, 44 and 45 were rerun at its code",
-    46: "Seed 46 was first run at the hold release's code",
+    46: "Seeds 46 and 47 were first run at the hold release's code",
 }
 
 
