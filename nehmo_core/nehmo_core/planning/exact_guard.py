@@ -46,6 +46,14 @@ def _world(cell: Cell) -> CellWorld:
     return world
 
 
+def _closest(
+    world: CellWorld, arm_id: str, x: np.ndarray, peers: Mapping[str, np.ndarray], cutoff: float
+) -> float:
+    """Arm ``arm_id`` posed at ``x``: its smallest distance [m] to ``peers`` (already posed)."""
+    world.set_joint_positions(arm_id, x)
+    return min(world.distance(arm_id, p, cutoff) for p in peers)
+
+
 def prepare(cell: Cell) -> None:
     """Build ``cell``'s world now (a planner does it when built, not in its first tick)."""
     _world(cell)
@@ -68,14 +76,9 @@ def guard_step(
     world = _world(cell)
     cutoff = 2.0 * floor + 0.05
     world.set_configuration(held)
-
-    def closest(x: np.ndarray) -> float:
-        world.set_joint_positions(arm_id, x)
-        return min(world.distance(arm_id, p, cutoff) for p in held)
-
-    now = closest(q)
+    now = _closest(world, arm_id, q, held, cutoff)
     for scale in _SCALES:
-        ends = [closest(q + scale * step), closest(q + 0.5 * scale * step)]
+        ends = [_closest(world, arm_id, q + f * scale * step, held, cutoff) for f in (1.0, 0.5)]
         if min(ends) >= min(floor, now):
             return scale
     return 0.0
@@ -92,5 +95,5 @@ def closer_than(
     if not peers or floor <= 0.0:
         return False
     world = _world(cell)
-    world.set_configuration({**peers, arm_id: q})
-    return min(world.distance(arm_id, p, 2.0 * floor) for p in peers) < floor
+    world.set_configuration(peers)
+    return _closest(world, arm_id, q, peers, 2.0 * floor) < floor

@@ -217,10 +217,10 @@ class NehmoPlanner(StallEscape):
         slow = self._evaluate_current(q, peers, ids, dict.fromkeys(ids, s.hold_bound))
         half = [0.5 * self.group_margin(self.pairs[p].model_index, s.hold_bound) for p in ids]
         floor = [h if p in participants else s.epsilon for p, h in zip(ids, half, strict=True)]
+        if np.any(slow.values < np.array(floor)):
+            return True
         near = {p: peers[p] for p, v in zip(ids, slow.values, strict=True) if v < GUARD_NEAR}
-        return bool(np.any(slow.values < np.array(floor))) or (
-            closer_than(self.cell, self.arm_id, q, near, s.exact_guard)
-        )
+        return closer_than(self.cell, self.arm_id, q, near, s.exact_guard)
 
     @property
     def announcement(self) -> float:
