@@ -135,6 +135,13 @@ PARAMS: dict[str, Param] = {
     "hold_release": Param(
         _PLANNER.hold_release, "[rad] goal distance beyond which a holding arm withdraws its bound"
     ),
+    "silent_lookahead": Param(
+        _PLANNER.silent_lookahead,
+        "[s] how far a silent peer's observed velocity is extrapolated (0: off)",
+    ),
+    "silent_clearance": Param(
+        _PLANNER.silent_clearance, "[m] V along a silent peer's path that the arm steps away from"
+    ),
     "deadline": Param(0.0, "[s] solve budget; 0: 75 % of the period", 0.0, 10.0),
     "peer_timeout": Param(
         _CONTROL.peer_timeout, "[s] a joint state older than this is stale", 0.0, 60.0
@@ -201,9 +208,10 @@ class ArmPlannerNode(Node):
         )
         fault = parse_fault(str(p["fault_injection"]))
         # every node parameter named like a planner setting sets it, converted to its type
-        named = [f.name for f in fields(PlannerSettings) if f.name in p and f.name != "deadline"]
+        own = ("deadline", "tick")  # from the rate
+        named = [f.name for f in fields(PlannerSettings) if f.name in p and f.name not in own]
         given = {k: type(getattr(_PLANNER, k))(p[k]) for k in named}
-        settings = PlannerSettings(**given, deadline=deadline)
+        settings = PlannerSettings(**given, deadline=deadline, tick=1.0 / rate)
         planner = build_planner(
             p["planner"], self.cell, arm_id, p["model"], settings, bool(p["allow_unmodelled"])
         )

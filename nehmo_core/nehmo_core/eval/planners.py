@@ -84,6 +84,7 @@ def build_planners(
     if cache is not None and set(cache) == set(cell.arm_ids):
         return dict(cache)
     out: dict[str, Planner] = {}
+    settings = (settings or PlannerSettings()).replace(tick=period)  # plan() runs once a period
     for arm_id, kind in kinds.items():
         models = registry.models_for(kind, cell) if kind in OPT_KINDS else []
         if kind in OPT_KINDS and not models and len(cell.arms) > 1:  # alone: nothing to model

@@ -58,6 +58,7 @@ def status_message(
         "peers_unmodelled": _ids(t.peers_unmodelled),
         "critical_peer": t.critical_peer or "",
         "escaping": "true" if t.escaping else "false",
+        "evading": "true" if t.evading else "false",
         "speed_bound": repr(float(t.speed_bound)),
     }
     return DiagnosticStatus(
@@ -109,6 +110,7 @@ def telemetry_from_status(msg: DiagnosticStatus) -> StatusRecord:
         peers_unmodelled=_split(values.get("peers_unmodelled", "")),
         critical_peer=values.get("critical_peer") or None,
         escaping=values.get("escaping") == "true",
+        evading=values.get("evading") == "true",
         speed_bound=_float(values, "speed_bound") if "speed_bound" in values else 1.0,
     )
     return StatusRecord(

@@ -32,7 +32,8 @@ class Telemetry:
     peer in range), ``infeasible``, ``iteration_limit``, ``timeout``, ``failed``, or a baseline's
     own (``naive_planner``, ``reckless``, ``tracking``). ``min_value`` is the smallest
     ``V(t_plan, x)`` [m] over constrained peers at the current state (``inf`` without peers).
-    ``escaping``: NeHMO is leaving a stall (see ``PlannerSettings.escape``).
+    ``escaping``: NeHMO is leaving a stall (see ``PlannerSettings.escape``); ``evading``: out of
+    the predicted path of a peer that announces nothing (``PlannerSettings.silent_lookahead``).
     """
 
     solve_time: float  # [s], wall time of the whole plan() call
@@ -46,6 +47,7 @@ class Telemetry:
     peers_unmodelled: tuple[str, ...] = ()  # in reach but no pair model fits: NOT constrained
     critical_peer: str | None = None
     escaping: bool = False  # the step followed a stall-escape direction, not the goal
+    evading: bool = False  # the step headed away from a silent peer's predicted path
     speed_bound: float = 1.0  # announced with this command: a fraction of ū it keeps (1: none)
 
 

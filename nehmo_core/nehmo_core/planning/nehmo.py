@@ -43,9 +43,10 @@ from nehmo_core.planning.interface import (
 from nehmo_core.planning.margins import CertifiedMargins
 from nehmo_core.planning.native import loop
 from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
-from nehmo_core.planning.pair_frame import PairMapping, arm_reach, match_pair
+from nehmo_core.planning.pair_frame import constrained_pairs
 from nehmo_core.planning.self_clearance import SelfClearance, SelfClearanceRows, project_step
 from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.silent_peers import SilentPathWatch
 from nehmo_core.planning.solvers import OptSolver, SqpSolver, make_solver
 from nehmo_core.planning.speed_bounds import FULL_SPEED, check_bound
 from nehmo_core.planning.stall_escape import StallEscape
@@ -112,24 +113,9 @@ class NehmoPlanner(StallEscape):
             if c_loop is not None:
                 for model in self.models:
                     c_loop.model(model)
-        self.pairs: dict[str, PairMapping] = {}
-        skipped, unmodelled = [], []
-        geometry = [m.geometry for m in self.models]
-        for peer in cell.arms:
-            if peer.arm_id == arm_id:
-                continue
-            gap = np.linalg.norm(np.subtract(peer.base.xyz, self.arm.base.xyz))
-            reach = arm_reach(self.robot.name) + arm_reach(peer.robot.name)
-            if gap > reach + self.settings.reach_margin:
-                skipped.append(peer.arm_id)
-                continue
-            mapping = match_pair(self.arm, peer, geometry)
-            if mapping is None:
-                unmodelled.append(peer.arm_id)
-            else:
-                self.pairs[peer.arm_id] = mapping
-        self.peers_skipped = tuple(skipped)
-        self.peers_unmodelled = tuple(unmodelled)
+        self.pairs, self.peers_skipped, self.peers_unmodelled = constrained_pairs(
+            cell, arm_id, [m.geometry for m in self.models], self.settings.reach_margin
+        )
         used = [m.model_index for m in self.pairs.values()]
         self.margins = CertifiedMargins(self.models, self.settings, used)
         self.epsilon_source = self.margins.source
@@ -173,6 +159,8 @@ class NehmoPlanner(StallEscape):
         self._rng = np.random.default_rng(seed)
         self._clear_stall()
         self.guarded = 0  # commands the exact guard shortened (planning/exact_guard.py)
+        s = self.settings
+        self._watch = SilentPathWatch(s.silent_lookahead, s.silent_clearance, s.tick)
 
     # -- announced speed bound ---------------------------------------------------------------
     def _announce(
@@ -406,7 +394,13 @@ class NehmoPlanner(StallEscape):
             return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
         now = self._current(q, others, bounds)
         escaping = self.settings.escape and self._escape_left > 0
-        problem = self._problem(self._escape_error(now) if escaping else error0, now, rows, cap)
+        away = self._watch.target(
+            self.models, now.ids, now.model_index, now.states, now.values,
+            self._watch.velocities(others, participants), self.robot.dof,
+            self.settings.t_plan, self.settings.t_plan * self.settings.u_max * cap,
+        )  # fmt: skip
+        target = self._escape_error(now) if escaping else error0
+        problem = self._problem(target if away is None else away, now, rows, cap)
         try:
             hessian = self._hessian if self.settings.sqp_warm_hessian else None
             y_start = problem.naive_step() if self._warm is None else self._warm
@@ -445,6 +439,7 @@ class NehmoPlanner(StallEscape):
             iterations=result.iterations if result is not None else 0,
             critical_peer=critical,
             escaping=escaping and not fail_safe,  # a fail-safe step followed no escape direction
+            evading=away is not None and not fail_safe,
             **info,
         )
         return PlanResult(u, telemetry)

@@ -34,13 +34,14 @@ import torch
 
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.robots.loader import load_robot
-from nehmo_core.robots.model import ArmSpec, Pose, RobotModel, wrap_angle
+from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel, wrap_angle
 
 __all__ = [
     "ModelGeometry",
     "PairMapping",
     "arm_reach",
     "base_yaw_joint",
+    "constrained_pairs",
     "inverse_pose",
     "match_pair",
     "pose_from_matrix",
@@ -172,3 +173,27 @@ def arm_reach(robot_name: str, samples: int = 2000) -> float:
     with torch.no_grad():
         pts = kin.link_positions(q).numpy()
     return float(np.linalg.norm(pts, axis=-1).max())
+
+
+def constrained_pairs(
+    cell: Cell, arm_id: str, models: Sequence[ModelGeometry], reach_margin: float
+) -> tuple[dict[str, PairMapping], tuple[str, ...], tuple[str, ...]]:
+    """``arm_id``'s peers sorted three ways: ``(pairs, skipped, unmodelled)``, the peers in reach
+    with the mapping into the frame of a model that fits them, the peers farther apart than
+    their two reaches plus ``reach_margin`` [m], and the peers in reach that no model fits."""
+    own = cell.arm(arm_id)
+    pairs: dict[str, PairMapping] = {}
+    skipped, unmodelled = [], []
+    for peer in cell.arms:
+        if peer.arm_id == arm_id:
+            continue
+        gap = np.linalg.norm(np.subtract(peer.base.xyz, own.base.xyz))
+        if gap > arm_reach(own.robot.name) + arm_reach(peer.robot.name) + reach_margin:
+            skipped.append(peer.arm_id)
+            continue
+        mapping = match_pair(own, peer, models)
+        if mapping is None:
+            unmodelled.append(peer.arm_id)
+        else:
+            pairs[peer.arm_id] = mapping
+    return pairs, tuple(skipped), tuple(unmodelled)

@@ -21,6 +21,7 @@ PAPER_OPT: dict[str, Any] = {
     "fail_safe": "single",
     "hold_bound": 1.0,
     "exact_guard": 0.0,
+    "silent_lookahead": 0.0,
     "certified_epsilon": False,
 }
 """What the paper's Opt leaves out of NeHMO's defaults (the ``paper`` preset, ``nehmo_paper``)."""
@@ -90,6 +91,14 @@ class PlannerSettings:
     # from every peer that holds at its goal under an announced bound, and a holding arm flees a
     # full-speed peer closer than that (planning/exact_guard.py; 0: both off)
     exact_guard: float = 0.01
+    # a peer that announces nothing is extrapolated silent_lookahead [s] along its observed joint
+    # velocity (its motion over one tick [s] between plan() calls); when V(t_plan) at a point of
+    # that path is below silent_clearance [m] and the peer is approaching, the step's target is
+    # up ∂V/∂q_own there instead of the goal; the V rows are unchanged
+    # (planning/silent_peers.py; silent_lookahead = 0: off)
+    silent_lookahead: float = 2.0
+    silent_clearance: float = 0.2
+    tick: float = 0.04
     # self-collision velocity dampers on the step and the fail-safe (not in the paper's Opt):
     # link pairs closer than self_influence [m] may close at most self_gain of their distance
     # above self_safety [m] per planned step (planning/self_clearance.py)
@@ -139,6 +148,7 @@ class PlannerSettings:
             "u_max",
             "d_max",
             "deadline",
+            "tick",
             "sqp_tol",
             "sqp_screen",
         ):
@@ -170,6 +180,9 @@ class PlannerSettings:
             raise InvalidValueError("fail_safe_slack", "must be >= 0 [m]", self.fail_safe_slack)
         if not self.fail_safe_harm >= 0.0:
             raise InvalidValueError("fail_safe_harm", "must be >= 0 [m/s]", self.fail_safe_harm)
+        for name in ("silent_lookahead", "silent_clearance"):
+            if not getattr(self, name) >= 0.0:
+                raise InvalidValueError(name, "must be >= 0 (0: off)", getattr(self, name))
         if not self.exact_guard >= 0.0:
             raise InvalidValueError("exact_guard", "must be >= 0 [m] (0: off)", self.exact_guard)
         if not self.self_safety >= 0.0:

@@ -1,0 +1,96 @@
+"""Stepping out of the way of a peer that announces nothing (not in the paper).
+
+A peer that takes no part in the speed announcements (a reckless or foreign arm) is planned at
+full speed, as the paper does: the V rows hold against its worst case ``t_safe`` ahead. They
+say nothing about where it is going. An arm that keeps heading for its goal until those rows
+bind can then be deep inside the path of a peer that drives straight through it, and by the
+time the fail-safe starts it cannot get out: on development seeds, in most collisions with the
+reckless Kinova no constant full-speed command from the first fail-safe tick would have escaped
+the Kinova's remaining path.
+
+:class:`SilentPathWatch` extrapolates each silent peer's observed joint velocity (the change of
+its position between two ``plan()`` calls ``tick`` apart) up to ``lookahead`` seconds and
+evaluates ``V(t_plan)`` with the peer at four points of that path. When the lowest is below
+``clearance`` and lower than now by more than :data:`APPROACH` (the peer is coming closer), the
+step's target becomes a full-speed step up ``∂V/∂q_own`` at that point instead of the goal.
+Only the objective changes: the V rows against the peer's worst case stay as they are, so the
+guarantee of the paper's Opt is kept, and a peer that stops (or moves away) stops steering it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Mapping, Sequence
+
+import numpy as np
+
+from nehmo_core.planning.value_model import PairValueModel
+
+__all__ = ["APPROACH", "SilentPathWatch"]
+
+#: [m] a predicted V must be this much below the current one to count as an approach.
+APPROACH = 0.02
+#: shares of ``lookahead`` at which the peer's path is evaluated.
+_POINTS = np.array([0.25, 0.5, 0.75, 1.0])
+
+
+class SilentPathWatch:
+    """The observed velocities of silent peers and the escape step from their paths."""
+
+    def __init__(self, lookahead: float, clearance: float, tick: float) -> None:
+        self.lookahead = lookahead
+        self.clearance = clearance
+        self.tick = tick
+        self._last: dict[str, np.ndarray] = {}
+
+    def reset(self) -> None:
+        self._last = {}
+
+    def velocities(
+        self, peers: Mapping[str, np.ndarray], participants: Collection[str]
+    ) -> dict[str, np.ndarray]:
+        """Each silent peer's joint velocity [rad/s] since the previous call (peers seen for the
+        first time, and peers that take part in the announcements, have none)."""
+        last, self._last = self._last, {p: q.copy() for p, q in peers.items()}
+        return {
+            p: (q - last[p]) / self.tick
+            for p, q in peers.items()
+            if p in last and p not in participants
+        }
+
+    def target(
+        self,
+        models: Sequence[PairValueModel],
+        ids: Sequence[str],
+        model_index: Sequence[int],
+        states: Sequence[np.ndarray],
+        values: np.ndarray,
+        velocities: Mapping[str, np.ndarray],
+        n1: int,
+        t_plan: float,
+        step: float,
+    ) -> np.ndarray | None:
+        """Minus a ``step`` [rad] (largest joint) up ``∂V/∂q_own`` at the lowest point of the
+        silent peers' predicted paths, when one comes within ``clearance``; else None.
+
+        ``ids``, ``model_index``, ``states`` and ``values`` describe the constrained peers now
+        (pair states and ``V(t_plan)``); ``n1`` is this arm's joint count."""
+        if self.lookahead <= 0.0:
+            return None
+        worst: tuple[float, np.ndarray] | None = None
+        for i, p in enumerate(ids):
+            v = velocities.get(p)
+            if v is None:
+                continue
+            model = models[model_index[i]]
+            path = np.repeat(states[i][None, :], len(_POINTS), axis=0)
+            path[:, n1 : n1 + model.n2] += np.outer(_POINTS * self.lookahead, v)
+            ahead, grads = model.evaluate(t_plan, path)
+            j = int(np.argmin(ahead))
+            low = float(ahead[j])
+            approaching = low < self.clearance and low < values[i] - APPROACH
+            if approaching and (worst is None or low < worst[0]):
+                worst = (low, grads[j][:n1])
+        if worst is None:
+            return None
+        peak = float(np.abs(worst[1]).max())
+        return None if peak < 1e-9 else -(step / peak) * worst[1]
