@@ -45,7 +45,11 @@ SEED_NOTES: dict[int, str] = {
     45: "Seed 45's stuck three-UR5 episodes were read (logs only, no change made) before the "
     "hold release; that change was found and tuned on development seeds 30 and 31 "
     "(`../options/README.md`). Seeds 43, 44 and 45 were rerun at its code",
-    46: "Seeds 46 and 47 were first run at the hold release's code",
+    46: "Seeds 46 and 47 were first run at the hold release's code. The Kinova-reckless rows "
+    "of seeds 43–47 were rerun after the silent-path watch (`../options/silent_paths.md`, tuned "
+    "on development seeds 30–32); their other rows are of the code before it, which acts "
+    "differently only against peers that announce nothing",
+    48: "Seed 48 was first run at the silent-path watch's code, every row",
 }
 
 
@@ -82,7 +86,7 @@ def table(seeds: list[int]) -> str:
         "# Tables II–IV on fresh scenario seeds",
         "",
         f"Seeds {', '.join(map(str, seeds))}: scenario sets that were not used for tuning "
-        "(the development seed is 31, `../options/speed_bounds.md`). "
+        "(the development seeds are 30, 31 and 32, `../options/README.md`). "
         + "".join(SEED_NOTES[s] + ". " for s in seeds if s in SEED_NOTES)
         + "100 episodes per row and seed, "
         "`nehmo` with its defaults (maximin fail-safe, announced speed bounds, certified "

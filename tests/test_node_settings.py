@@ -22,6 +22,16 @@ def test_planner_settings_given_as_node_parameters_reach_the_planner() -> None:
         assert isinstance(s.hold_release, float) and isinstance(s.escape, bool)
 
 
+def test_the_silent_path_watch_takes_its_parameters_and_the_nodes_period() -> None:
+    given = ["silent_lookahead:=1.5", "silent_clearance:=0.1", "rate:=20.0"]
+    with in_process("arm_planner", [*BASE, *given]) as nodes:
+        node = ArmPlannerNode()
+        nodes.add(node)
+        s = node.controller.planner.settings
+        assert (s.silent_lookahead, s.silent_clearance) == (1.5, 0.1)
+        assert s.tick == pytest.approx(0.05)  # velocities over one period of the rate
+
+
 def test_a_release_inside_the_hold_tolerance_is_rejected_by_name() -> None:
     with (
         in_process("arm_planner", [*BASE, "hold_release:=0.01"]),
