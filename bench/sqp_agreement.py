@@ -127,7 +127,12 @@ def _cell(
     cell = load_cell(cell_name)
     solvers = {a: _Both() for a in cell.arm_ids}
     models = [model, *far_models(ModelRegistry(), cell, model)]  # every pair constrained
-    planners = {a: NehmoPlanner(cell, a, models, solver=solvers[a]) for a in cell.arm_ids}
+    # plan() gets no peer_bounds here, so every peer would count as silent; in cells of NeHMO
+    # arms the silent-path watch never acts, so it is off
+    watch_off = PlannerSettings(silent_lookahead=0.0)
+    planners = {
+        a: NehmoPlanner(cell, a, models, watch_off, solver=solvers[a]) for a in cell.arm_ids
+    }
     for scenario in _scenarios(cell_name, scenarios, 200):
         q = {a: np.array(v) for a, v in scenario.start.items()}
         for p in planners.values():

@@ -43,7 +43,7 @@ def _target(watch: SilentPathWatch, own, peer, velocity) -> np.ndarray | None:
 
 
 def test_velocities_are_the_motion_between_calls_of_silent_peers_only() -> None:
-    watch = SilentPathWatch(lookahead=2.0, clearance=0.2, tick=0.04)
+    watch = SilentPathWatch(lookahead=2.0, clearance=0.2, tick=0.04, d_max=0.5)
     q = {"a": np.zeros(6), "b": np.zeros(6)}
     assert watch.velocities(q, participants=()) == {}  # first sight: no velocity yet
     moved = {"a": np.full(6, 0.02), "b": np.full(6, -0.01)}
@@ -54,8 +54,21 @@ def test_velocities_are_the_motion_between_calls_of_silent_peers_only() -> None:
     assert watch.velocities(moved, participants=()) == {}
 
 
+def test_velocities_wrap_continuous_joints_and_stay_within_the_speed_bound() -> None:
+    kinova = load_cell("ur5_kinova").arm("kinova_0").robot  # joints 0, 3, 5 continuous
+    watch = SilentPathWatch(2.0, 0.2, 0.04, d_max=0.5, robots={"k": kinova})
+    q = np.zeros(6)
+    q[0] = np.pi - 0.005
+    watch.velocities({"k": q}, participants=())
+    q2 = q.copy()
+    q2[0] = -np.pi + 0.005  # 0.01 rad across ±π, not −2π + 0.01
+    q2[1] = 0.1  # 2.5 rad/s over one tick: more than any peer may move (a skipped tick)
+    v = watch.velocities({"k": q2}, participants=())["k"]
+    np.testing.assert_allclose(v, [0.25, 0.5, 0.0, 0.0, 0.0, 0.0], atol=1e-9)
+
+
 def test_an_approaching_peer_turns_the_target_up_the_value_at_its_path() -> None:
-    watch = SilentPathWatch(lookahead=2.0, clearance=0.2, tick=0.04)
+    watch = SilentPathWatch(lookahead=2.0, clearance=0.2, tick=0.04, d_max=0.5)
     own, peer = np.array([0.0, 0.0]), np.array([0.5, 0.0])  # V = 0.4 now
     # coming straight at the arm at 0.2 /s: V = 0.0 two seconds ahead, pushing along −x
     target = _target(watch, own, peer, [-0.2, 0.0])
@@ -69,8 +82,8 @@ def test_an_approaching_peer_turns_the_target_up_the_value_at_its_path() -> None
     assert _target(watch, own, np.array([2.0, 0.0]), [-0.2, 0.0]) is None  # stays above 0.2
     # an approach smaller than APPROACH is not one
     slow = APPROACH / 2.0 / 2.0  # V falls by APPROACH / 2 over the lookahead
-    assert _target(SilentPathWatch(2.0, 0.5, 0.04), own, peer, [-slow, 0.0]) is None
-    assert _target(SilentPathWatch(0.0, 0.2, 0.04), own, peer, [-0.2, 0.0]) is None  # off
+    assert _target(SilentPathWatch(2.0, 0.5, 0.04, 0.5), own, peer, [-slow, 0.0]) is None
+    assert _target(SilentPathWatch(0.0, 0.2, 0.04, 0.5), own, peer, [-0.2, 0.0]) is None  # off
 
 
 @pytest.mark.parametrize("name", ["silent_lookahead", "silent_clearance", "tick"])

@@ -32,8 +32,9 @@ class Telemetry:
     peer in range), ``infeasible``, ``iteration_limit``, ``timeout``, ``failed``, or a baseline's
     own (``naive_planner``, ``reckless``, ``tracking``). ``min_value`` is the smallest
     ``V(t_plan, x)`` [m] over constrained peers at the current state (``inf`` without peers).
-    ``escaping``: NeHMO is leaving a stall (see ``PlannerSettings.escape``); ``evading``: out of
-    the predicted path of a peer that announces nothing (``PlannerSettings.silent_lookahead``).
+    ``escaping``: NeHMO is leaving a stall (see ``PlannerSettings.escape``); ``evading``: heading
+    out of the predicted path of a peer that announces nothing
+    (``PlannerSettings.silent_lookahead``).
     """
 
     solve_time: float  # [s], wall time of the whole plan() call

@@ -160,7 +160,10 @@ class NehmoPlanner(StallEscape):
         self._clear_stall()
         self.guarded = 0  # commands the exact guard shortened (planning/exact_guard.py)
         s = self.settings
-        self._watch = SilentPathWatch(s.silent_lookahead, s.silent_clearance, s.tick)
+        robots = {p: self.cell.arm(p).robot for p in self.pairs}
+        self._watch = SilentPathWatch(
+            s.silent_lookahead, s.silent_clearance, s.tick, s.d_max, robots
+        )
 
     # -- announced speed bound ---------------------------------------------------------------
     def _announce(
@@ -428,7 +431,7 @@ class NehmoPlanner(StallEscape):
         held = {p: others[p] for p in near if p in participants and bounds[p] < FULL_SPEED}
         share = guard_step(self.cell, self.arm_id, q, u, held, self.settings)
         u, self.guarded = u * share, self.guarded + (share < 1.0)
-        if self.settings.escape:
+        if self.settings.escape and away is None:  # stepping aside is no stall
             self._track_stall(error0, min_constraint < self.settings.stall_margin)
         telemetry = Telemetry(
             solve_time=time.perf_counter() - start,
@@ -438,7 +441,7 @@ class NehmoPlanner(StallEscape):
             min_constraint=min_constraint,
             iterations=result.iterations if result is not None else 0,
             critical_peer=critical,
-            escaping=escaping and not fail_safe,  # a fail-safe step followed no escape direction
+            escaping=escaping and away is None and not fail_safe,  # else it followed no escape
             evading=away is not None and not fail_safe,
             **info,
         )

@@ -9,7 +9,9 @@ reckless Kinova no constant full-speed command from the first fail-safe tick wou
 the Kinova's remaining path.
 
 :class:`SilentPathWatch` extrapolates each silent peer's observed joint velocity (the change of
-its position between two ``plan()`` calls ``tick`` apart) up to ``lookahead`` seconds and
+its position between two ``plan()`` calls ``tick`` apart, continuous joints wrapped, clipped to
+the peers' speed bound ``d̄``: a call that follows a skipped tick cannot make a peer look faster
+than it may move) up to ``lookahead`` seconds and
 evaluates ``V(t_plan)`` with the peer at four points of that path. When the lowest is below
 ``clearance`` and lower than now by more than :data:`APPROACH` (the peer is coming closer), the
 step's target becomes a full-speed step up ``∂V/∂q_own`` at that point instead of the goal.
@@ -24,6 +26,7 @@ from collections.abc import Collection, Mapping, Sequence
 import numpy as np
 
 from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.robots.model import RobotModel
 
 __all__ = ["APPROACH", "SilentPathWatch"]
 
@@ -36,10 +39,19 @@ _POINTS = np.array([0.25, 0.5, 0.75, 1.0])
 class SilentPathWatch:
     """The observed velocities of silent peers and the escape step from their paths."""
 
-    def __init__(self, lookahead: float, clearance: float, tick: float) -> None:
+    def __init__(
+        self,
+        lookahead: float,
+        clearance: float,
+        tick: float,
+        d_max: float,
+        robots: Mapping[str, RobotModel] | None = None,
+    ) -> None:
         self.lookahead = lookahead
         self.clearance = clearance
         self.tick = tick
+        self.d_max = d_max
+        self.robots = dict(robots or {})  # peer id → its robot (continuous joints wrapped)
         self._last: dict[str, np.ndarray] = {}
 
     def reset(self) -> None:
@@ -48,14 +60,17 @@ class SilentPathWatch:
     def velocities(
         self, peers: Mapping[str, np.ndarray], participants: Collection[str]
     ) -> dict[str, np.ndarray]:
-        """Each silent peer's joint velocity [rad/s] since the previous call (peers seen for the
-        first time, and peers that take part in the announcements, have none)."""
+        """Each silent peer's joint velocity [rad/s] since the previous call, within ±d̄ (peers
+        seen for the first time, and peers that take part in the announcements, have none)."""
         last, self._last = self._last, {p: q.copy() for p, q in peers.items()}
-        return {
-            p: (q - last[p]) / self.tick
-            for p, q in peers.items()
-            if p in last and p not in participants
-        }
+        out = {}
+        for p, q in peers.items():
+            if p in last and p not in participants:
+                step = q - last[p]
+                if p in self.robots:
+                    step = self.robots[p].wrap(step)
+                out[p] = np.clip(step / self.tick, -self.d_max, self.d_max)
+        return out
 
     def target(
         self,
