@@ -310,7 +310,7 @@ def run(
     # IPOPT, the authors' solver, on the dual cell for reference
     cell = load_cell("dual_ur5")
     ipopt = {
-        a: NehmoPlanner(cell, a, [model], PlannerSettings(solver="ipopt")) for a in cell.arm_ids
+        a: NehmoPlanner(cell, a, [model], WATCH_OFF.replace(solver="ipopt")) for a in cell.arm_ids
     }
     scenario = _scenarios("dual_ur5", 1, 200)[0]
     t, s, _ = _episode("dual_ur5", ipopt, scenario, min(steps, 100), "ur5_0")
