@@ -61,7 +61,10 @@ class SilentPathWatch:
         self, peers: Mapping[str, np.ndarray], participants: Collection[str]
     ) -> dict[str, np.ndarray]:
         """Each silent peer's joint velocity [rad/s] since the previous call, within ±d̄ (peers
-        seen for the first time, and peers that take part in the announcements, have none)."""
+        seen for the first time, and peers that take part in the announcements, have none;
+        none at all, and nothing kept, with the watch off)."""
+        if self.lookahead <= 0.0:
+            return {}
         last, self._last = self._last, {p: q.copy() for p, q in peers.items()}
         out = {}
         for p, q in peers.items():
