@@ -7,6 +7,11 @@ Modes
                        ``/diagnostics``) and append one
                        JSON line per message received to the file OUT (a file, not a pipe: a
                        pipe nobody reads fills up and stops the node); prints "listening"
+  flood SECONDS ARM    a plain rclpy node (no nehmo code) that publishes garbage at 100 Hz
+                       for SECONDS: JointState on ``/ARM/joint_states`` (NaN, inf, 1e9
+                       positions, three joints, unknown names; default header stamp) and
+                       Float64MultiArray on ``/ARM/velocity_controller/commands`` (NaN, five
+                       values, 1e6); prints one JSON line with the counts published
 """
 
 import json
@@ -60,10 +65,58 @@ def run_listen(seconds: float, out_path: str, topics: list[str]) -> int:
     return 0
 
 
+def run_flood(seconds: float, arm: str) -> int:
+    import rclpy
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    rclpy.init()
+    node = Node("foreign_flood")
+    states = node.create_publisher(JointState, f"/{arm}/joint_states", 100)
+    commands = node.create_publisher(Float64MultiArray, f"/{arm}/velocity_controller/commands", 10)
+    joints = [
+        "shoulder_pan_joint",
+        "shoulder_lift_joint",
+        "elbow_joint",
+        "wrist_1_joint",
+        "wrist_2_joint",
+        "wrist_3_joint",
+    ]
+    bad_states = [
+        (joints, [float("nan")] * 6),
+        (joints, [float("inf")] * 6),
+        (joints, [1e9] * 6),
+        (joints[:3], [0.1] * 3),
+        ([f"unknown_{i}" for i in range(6)], [0.1] * 6),
+    ]
+    bad_commands = [[float("nan")] * 6, [0.1] * 5, [1e6] * 6]
+    sent = {"states": 0, "commands": 0}
+    print(json.dumps({"flooding": arm}), flush=True)
+    end = time.monotonic() + seconds
+    k = 0
+    while time.monotonic() < end and rclpy.ok():
+        names, position = bad_states[k % len(bad_states)]
+        states.publish(JointState(name=names, position=position))
+        sent["states"] += 1
+        if k % 2 == 0:
+            commands.publish(Float64MultiArray(data=bad_commands[(k // 2) % len(bad_commands)]))
+            sent["commands"] += 1
+        k += 1
+        rclpy.spin_once(node, timeout_sec=0.0)
+        time.sleep(0.01)
+    print(json.dumps(sent), flush=True)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
 def main() -> int:
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "listen":
         return run_listen(float(args[0]), args[1], args[2:])
+    if mode == "flood":
+        return run_flood(float(args[0]), args[1])
     raise SystemExit(f"unknown mode {mode!r}")
 
 

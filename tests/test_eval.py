@@ -421,7 +421,7 @@ def test_one_line_summaries_give_the_papers_cr_and_self_collisions_apart() -> No
     from types import SimpleNamespace
 
     from nehmo_core.eval.batch import _postfix
-    from nehmo_ros.suite import format_metrics
+    from nehmo_core.eval.metrics import format_metrics
 
     episodes = [
         SimpleNamespace(outcome="collision", collision_kind="self"),
@@ -430,6 +430,7 @@ def test_one_line_summaries_give_the_papers_cr_and_self_collisions_apart() -> No
     assert _postfix(episodes) == "SR 50% CR 0% self 50%"
     metrics = {
         "sr": 50.0,
+        "successes": 1,
         "cr": 50.0,  # every collision, as the authors' code counts
         "cr_inter_arm": 0.0,
         "self_collision_rate": 50.0,
@@ -438,7 +439,8 @@ def test_one_line_summaries_give_the_papers_cr_and_self_collisions_apart() -> No
         "mpl": {"mean": 2.0},
         "episodes": 2,
     }
-    assert format_metrics(metrics).startswith("SR 50 %  CR 0 %  self 50 %  stuck 0 %")
+    assert format_metrics(metrics).startswith("SR 50 % (1 of 2)  CR 0 %  self 50 %  stuck 0 %")
+    assert "error" not in format_metrics(metrics)
 
 
 def test_evaluate_with_out_naming_a_file_is_one_clear_error(tmp_path: Path) -> None:

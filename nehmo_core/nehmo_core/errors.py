@@ -52,3 +52,11 @@ def as_options(options: Mapping[str, str]) -> Iterator[None]:
         if exc.parameter not in options:
             raise
         raise InvalidValueError(options[exc.parameter], exc.rule, exc.value) from None
+
+
+def one_line(err: BaseException, limit: int = 600) -> str:
+    """``err`` as one line (multi-line messages joined, very long ones shortened): what a
+    console entry point prints, and what a summary records as an episode's error."""
+    text = " ".join(part.strip() for part in str(err).splitlines() if part.strip())
+    text = text or type(err).__name__
+    return text if len(text) <= limit else text[: limit - 4] + " ..."

@@ -63,18 +63,19 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     summary = run_suite(scenario_file, [args.index], out, settings)
     episode = summary["episodes"][0]
+    evaluated = episode["outcome"] != "error"
     print(f"  {format_metrics(summary['metrics'])}")
-    if episode["outcome"]:
+    if evaluated:
         print(f"  outcome {episode['outcome']} at {episode['end_time']:.2f} s simulated")
     print(f"  middleware: {summary.get('rmw') or 'unknown'} (rclpy)")
     print(f"  bag:      {episode['log']}")
     print(f"  summary:  {out / 'summary.json'}")
     print(f"  process outputs: {out / 'logs'}")
-    if episode["outcome"] and not args.no_render:
+    if evaluated and not args.no_render:
         for path in render_episode(episode["log"], out / "renders"):
             print(f"  render:   {path}")
     print(f"  wall time: {time.perf_counter() - t0:.1f} s")
-    return 0 if episode["outcome"] else 1
+    return 0 if evaluated else 1
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -13,14 +13,17 @@ starts the episode once every planner is up and exits when it ends; then planner
 get SIGINT (SIGKILL after a bounded wait). Every episode bag (``<out>/episode_NNN/``, rosbag2
 layout) is evaluated with
 :mod:`nehmo_core.eval.metrics` (the batch runner's metrics); the per-episode results and the
-aggregate (SR, CR, planning time, MPL) go to ``<out>/summary.json``. Process output goes to
+aggregate (SR, CR, planning time, MPL) go to ``<out>/summary.json``. An episode whose node
+exits early (its error line is printed at once) or whose bag cannot be read counts as an
+``error``; the command then exits 1. Process output goes to
 ``<out>/logs/<episode>/`` (``commands.json`` there holds every process's command line).
 
 ``replay`` republishes a bag's topics through rclpy with their recorded timing (scaled by
 ``--rate``), for inspection with other tools or re-recording; it starts after ``--wait`` s of
 discovery or, with ``--min-subscribers N``, as soon as every topic's publisher has N
 subscriptions (an error if not within ``--wait`` s), and after the last message waits up to
-``--wait`` s for reliable subscribers to acknowledge. ``evaluate`` prints the metrics of bags.
+``--wait`` s for reliable subscribers to acknowledge. ``evaluate`` prints the metrics of bags
+(an unreadable one is an ``error`` in them, named on stderr, and the exit status is 2).
 
 The pieces: :mod:`.suite_settings`, :mod:`.processes`, :mod:`.suite` (episodes and the
 summary), :mod:`.replay`; this module is the command line.
@@ -35,7 +38,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from nehmo_core.errors import InvalidValueError, NehmoError
-from nehmo_core.eval.metrics import aggregate, evaluate_log
+from nehmo_core.eval.metrics import aggregate, evaluate_or_error
 from nehmo_core.sim.scenario_files import draw_scenario_set, load_scenario_set, save_scenario_set
 from nehmo_ros.oneline import one_line
 from nehmo_ros.replay import replay
@@ -126,12 +129,13 @@ def _run(args: argparse.Namespace) -> int:
     summary = run_suite(scenario_file, _episodes(args.episodes, count), out_dir, settings)
     print(format_metrics(summary["metrics"]))
     print(f"summary: {out_dir / 'summary.json'}")
-    if args.render and summary["episodes"] and summary["episodes"][0]["outcome"]:
+    first = summary["episodes"][0] if summary["episodes"] else None
+    if args.render and first and first["outcome"] != "error":
         from nehmo_core.eval.render import render_episode
 
         for path in render_episode(summary["episodes"][0]["log"], out_dir / "renders"):
             print(f"render: {path}")
-    return 0 if summary["metrics"] is not None else 1
+    return 1 if summary["metrics"]["errors"] else 0
 
 
 @contextmanager
@@ -152,14 +156,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "run":
             return _run(args)
         if args.command == "evaluate":
-            results = []
-            for path in args.logs:
-                with _readable(path):
-                    results.append(evaluate_log(path))
+            results = [evaluate_or_error(path) for path in args.logs]
             for path, r in zip(args.logs, results, strict=True):
-                print(f"{path}: {r.outcome} at {r.end_time:.2f} s, path {r.path_length:.2f} rad")
+                if r.outcome == "error":
+                    print(f"orchestrate: error: {r.error}", file=sys.stderr)
+                else:
+                    print(
+                        f"{path}: {r.outcome} at {r.end_time:.2f} s, path {r.path_length:.2f} rad"
+                    )
             print(format_metrics(aggregate(results).to_dict()))
-            return 0
+            return 2 if any(r.outcome == "error" for r in results) else 0
         with _readable(args.log):
             return replay(
                 Path(args.log),

@@ -116,18 +116,6 @@ class StateBuffer:
 def order_joints(
     robot: RobotModel, names: Sequence[str], position: Sequence[float], parameter: str
 ) -> np.ndarray:
-    """Positions in the robot's joint order: by ``names`` when given, else as they come."""
-    values = np.asarray(list(position), dtype=np.float64)
-    if names:
-        names = list(names)
-        if len(values) == len(names) and names == list(robot.joint_names):
-            return robot.check_q(values, parameter)  # in the robot's order already
-        if sorted(names) != sorted(robot.joint_names) or len(values) != len(names):
-            raise InvalidValueError(
-                parameter,
-                f"must name the joints of robot '{robot.name}' {list(robot.joint_names)} "
-                "once each, with one position per name",
-                {"name": names, "position": values.tolist()},
-            )
-        values = values[[names.index(j) for j in robot.joint_names]]
-    return robot.check_q(values, parameter)
+    """Positions in the robot's joint order (:meth:`RobotModel.joint_state`, the rule the
+    episode-log reader applies too)."""
+    return robot.joint_state(names, position, parameter)

@@ -5,22 +5,29 @@ For every episode the ``recorder`` starts first (and is waited for until it reco
 the episode once every planner is up and exits when it ends; then planners and recorder get
 SIGINT. Every episode bag is evaluated with :mod:`nehmo_core.eval.metrics` (the batch runner's
 metrics) and the aggregate goes to ``<out>/summary.json``.
+
+Every episode that was started counts: one whose processes failed (a node that exits before the
+episode ends, or not with status 0) or whose bag cannot be read is an ``error`` with its reason,
+in the summary's metrics and on the terminal. A node that exits early (a configuration error at
+start-up, a crash) stops the episode at once, and its own error line becomes the reason.
 """
 
 from __future__ import annotations
 
 import json
 import shutil
-import subprocess
 import time
 from collections.abc import Sequence
-from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from nehmo_core.errors import NehmoError
-from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log
+from nehmo_core.eval.metrics import (
+    EpisodeResult,
+    aggregate,
+    evaluate_or_error,
+    format_metrics,
+)
 from nehmo_core.eval.report import json_safe
 from nehmo_core.eval.setups import parse_row
 from nehmo_core.robots import load_cell
@@ -35,20 +42,53 @@ from nehmo_ros.processes import (
 )
 from nehmo_ros.suite_settings import SuiteSettings
 
-__all__ = ["EpisodeRun", "format_metrics", "run_episode", "run_suite"]
+__all__ = ["EpisodeRun", "error_line", "format_metrics", "run_episode", "run_suite"]
+
+#: [s] between checks of the episode's processes
+POLL = 0.1
 
 
 @dataclass(frozen=True)
 class EpisodeRun:
-    """One orchestrated episode: its log, its evaluation and how the processes ended."""
+    """One orchestrated episode: its log, its evaluation (an ``error`` result when the
+    processes failed or the bag cannot be read) and how the processes ended."""
 
     index: int
     log: Path
-    result: EpisodeResult | None
+    result: EpisodeResult
     exit_codes: dict[str, int | None]
     wall_seconds: float
-    error: str = ""
     rmw: str = ""  # the middleware the nodes reported at start
+
+    @property
+    def error(self) -> str:
+        return self.result.error
+
+
+def error_line(output: str) -> str:
+    """A node's own reason for failing, from its output: its ``<node>: error: ...`` line, else
+    the last line of a traceback, else its last line."""
+    lines = [ln.strip() for ln in output.splitlines() if ln.strip()]
+    for line in reversed(lines):
+        if ": error: " in line:
+            return line
+    if any(ln.startswith("Traceback") for ln in lines):
+        for line in reversed(lines):
+            if not line.startswith(("File ", "^", "~")) and ":" in line:
+                return line
+    return lines[-1] if lines else "no output"
+
+
+def _watch(procs: Sequence[Process], bridge: Process, budget: float) -> Process | None:
+    """Wait until the bridge exits (the episode ended) or ``budget`` s pass; the first other
+    process that exits before the bridge, if any (the episode is then over)."""
+    end = time.monotonic() + budget
+    while time.monotonic() < end and bridge.proc.poll() is None:
+        for p in procs:
+            if p is not bridge and p.proc.poll() is not None:
+                return p
+        time.sleep(POLL)
+    return None
 
 
 def run_episode(
@@ -92,7 +132,10 @@ def run_episode(
             ),
         )
         if not recorder.wait_for("recording", settings.startup_timeout):
-            raise NehmoError(f"the recorder did not start:\n{recorder.output()[-2000:]}")
+            wall = time.monotonic() - start
+            reason = f"the recorder did not start: {error_line(recorder.output())}"
+            codes["recorder"] = recorder.stop(settings.stop_timeout)
+            return EpisodeRun(episode, log_path, EpisodeResult.failed(reason, kinds), codes, wall)
         for arm_id, kind in kinds.items():
             params = {"arm_id": arm_id, "cell": cell_ref, "planner": kind, "model": settings.model}
             launch(
@@ -125,23 +168,30 @@ def run_episode(
             ),
         )
         budget = settings.startup_timeout + settings.time_limit / settings.real_time_factor + 30
-        with suppress(subprocess.TimeoutExpired):
-            bridge.proc.wait(budget)
+        early = _watch(procs, bridge, budget)
+        reasons = []
+        if early is not None:
+            reasons.append(
+                f"{early.name} exited with status {early.proc.returncode} before the episode "
+                f"ended: {error_line(early.output())}"
+            )
+        elif bridge.proc.poll() is None:
+            reasons.append(f"the episode did not end within {budget:.0f} s of wall time")
         codes["sim_bridge"] = bridge.stop(settings.stop_timeout)
         for p in procs:
             if p is not bridge:
                 codes[p.name] = p.stop(settings.stop_timeout)
-        failed = {n: c for n, c in codes.items() if c != 0}
+        for p in procs:
+            if p is not early and codes[p.name] != 0:
+                status = "killed" if codes[p.name] is None else f"exit {codes[p.name]}"
+                reasons.append(f"{p.name}: {status}: {error_line(p.output())}")
     wall = time.monotonic() - start
     rmw = reported_rmw(bridge.output())
-    if failed:
-        detail = "; ".join(f"{n}: exit {c}" for n, c in failed.items())
-        return EpisodeRun(episode, log_path, None, codes, wall, f"processes failed ({detail})", rmw)
-    try:
-        result = evaluate_log(log_path)
-    except NehmoError as exc:
-        return EpisodeRun(episode, log_path, None, codes, wall, str(exc), rmw)
-    return EpisodeRun(episode, log_path, result, codes, wall, rmw=rmw)
+    if reasons:
+        result = EpisodeResult.failed("; ".join(reasons), kinds)
+    else:
+        result = evaluate_or_error(log_path, kinds)
+    return EpisodeRun(episode, log_path, result, codes, wall, rmw)
 
 
 def run_suite(
@@ -151,43 +201,36 @@ def run_suite(
     runs = []
     for episode in episodes:
         run = run_episode(scenario_file, episode, out_dir, settings)
-        outcome = run.result.outcome if run.result else f"error: {run.error}"
+        outcome = run.result.outcome
+        if outcome == "error":
+            outcome = f"error: {run.error}"
+        ignored = run.result.malformed
+        if ignored:
+            listed = ", ".join(f"{t}: {n:,}" for t, n in ignored.items())
+            outcome += f" (malformed messages ignored: {listed})"
         print(f"episode {episode}: {outcome} ({run.wall_seconds:.1f} s wall) -> {run.log}")
         runs.append(run)
-    results = [r.result for r in runs if r.result is not None]
     summary = {
         "scenarios": str(scenario_file),
         "planner": settings.planner,
         "model": settings.model,
         "rmw": next((r.rmw for r in runs if r.rmw), ""),
-        "metrics": aggregate(results).to_dict() if results else None,
+        "metrics": aggregate([r.result for r in runs]).to_dict(),
         "episodes": [
             {
                 "episode": r.index,
                 "log": str(r.log),
-                "outcome": r.result.outcome if r.result else None,
-                "end_time": r.result.end_time if r.result else None,
-                "path_length": r.result.path_length if r.result else None,
+                "outcome": r.result.outcome,
+                "end_time": r.result.end_time if r.result.outcome != "error" else None,
+                "path_length": r.result.path_length if r.result.outcome != "error" else None,
                 "exit_codes": r.exit_codes,
                 "wall_seconds": r.wall_seconds,
                 "error": r.error,
+                "malformed_messages": r.result.malformed,
+                "malformed_reasons": r.result.malformed_reasons,
             }
             for r in runs
         ],
     }
     (out_dir / "summary.json").write_text(json.dumps(json_safe(summary), indent=1) + "\n")
     return summary
-
-
-def format_metrics(metrics: dict[str, Any] | None) -> str:
-    """One line of the paper's metrics."""
-    if metrics is None:
-        return "no episode could be evaluated"
-    pt, mpl = metrics["plan_time_ms"], metrics["mpl"]
-    return (
-        f"SR {metrics['sr']:.0f} %  CR {metrics.get('cr_inter_arm', metrics['cr']):.0f} %"
-        f"  self {metrics.get('self_collision_rate', 0.0):.0f} %"
-        f"  stuck {metrics['stuck_rate']:.0f} %"
-        f"  plan time {pt['mean']:.2f} ± {pt['std']:.2f} ms  MPL {mpl['mean']:.2f} rad"
-        f"  ({metrics['episodes']} episodes)"
-    )

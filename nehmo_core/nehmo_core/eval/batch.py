@@ -3,22 +3,27 @@
 Each worker process keeps its simulators, value models (compiled once, cached on disk) and
 decentralized planners between episodes; centralized planners plan each scenario anew. The
 metrics of a row are computed from its logs (:func:`nehmo_core.eval.metrics.evaluate_log`) and
-checked against the runner's in-memory results.
+checked against the runner's in-memory results. An episode that raises, or whose log cannot be
+read, stays in the row as an ``error`` with its reason (the traceback goes to stderr); the row
+goes on.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
 import time
+import traceback
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from nehmo_core.errors import one_line
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
-from nehmo_core.eval.metrics import EpisodeResult, RowMetrics, aggregate, evaluate_log
+from nehmo_core.eval.metrics import EpisodeResult, RowMetrics, aggregate, evaluate_or_error
 from nehmo_core.eval.planners import build_planners, unmodelled_peers
 from nehmo_core.eval.setups import OPT_KINDS, get_setup, is_centralized, parse_row, row_slug
 from nehmo_core.logs import remove_bag
@@ -106,7 +111,24 @@ def _simulator(cell_name: str, settings: EpisodeSettings) -> CellSimulator:
 
 
 def _run_job(config: BatchConfig, job: _Job) -> tuple[int, EpisodeResult, float, dict[str, Any]]:
+    """One episode in a worker; an exception becomes an ``error`` result with its reason."""
     start = time.perf_counter()
+    try:
+        return _episode(config, job, start)
+    except Exception as exc:
+        reason = f"{type(exc).__name__}: {one_line(exc)}"
+        print(
+            f"episode {job.index} of row {job.row!r} failed: {reason}\n{traceback.format_exc()}",
+            file=sys.stderr,
+            flush=True,
+        )
+        used: dict[str, Any] = {"value_models": {}, "unmodelled_peers": {}, "epsilon": {}}
+        return job.position, EpisodeResult.failed(reason), time.perf_counter() - start, used
+
+
+def _episode(
+    config: BatchConfig, job: _Job, start: float
+) -> tuple[int, EpisodeResult, float, dict[str, Any]]:
     setup = get_setup(config.setup)
     cell = load_cell(setup.cell)
     settings = config.episode_settings()
@@ -208,8 +230,15 @@ def run_rows(
                     bar.update(1)
                     bar.set_postfix_str(_postfix(memory.values()))
             logs = [job.log_path for job in jobs]
-            from_logs = [evaluate_log(p) for p in logs]
-            mismatches = [k for k, r in enumerate(from_logs) if r != memory[k]]
+            from_logs = [
+                memory[k] if memory[k].outcome == "error" else evaluate_or_error(p, kinds_of[row])
+                for k, p in enumerate(logs)
+            ]
+            mismatches = [
+                k
+                for k, r in enumerate(from_logs)
+                if r != memory[k] and memory[k].outcome != "error"
+            ]
             run = RowRun(
                 row=row,
                 kinds=kinds_of[row],

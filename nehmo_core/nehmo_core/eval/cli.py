@@ -24,6 +24,7 @@ from pathlib import Path
 
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.eval.batch import BatchConfig, RowRun, run_rows
+from nehmo_core.eval.metrics import format_metrics
 from nehmo_core.eval.report import markdown_table, setup_summary, write_summary
 from nehmo_core.eval.scenario_sets import scenario_set_for
 from nehmo_core.eval.setups import SETUPS, get_setup, parse_row, row_slug
@@ -166,11 +167,7 @@ def _run_tasks(args: argparse.Namespace, rows: list[str], settings: PlannerSetti
 
     def report(row: dict[str, object]) -> None:
         ours: dict[str, float] = row["ours"]  # type: ignore[assignment]
-        print(
-            f"tasks {row['row']}: SR {ours['sr']:.0f}% CR {ours['cr_inter_arm']:.0f}% "
-            f"stuck {ours['stuck_rate']:.0f}%",
-            file=sys.stderr,
-        )
+        print(f"tasks {row['row']}: {format_metrics(ours)}", file=sys.stderr)
 
     summary = run_tasks(config, rows, tasks, args.workers, not args.no_progress, report)
     path = args.out / "summary.json"
@@ -178,6 +175,18 @@ def _run_tasks(args: argparse.Namespace, rows: list[str], settings: PlannerSetti
     path.with_suffix(".md").write_text(markdown(summary))
     print(markdown(summary))
     print(f"wrote {path} and {path.with_suffix('.md')}", file=sys.stderr)
+    return _errors_status({r["row"]: r["ours"]["errors"] for r in summary["rows"]})
+
+
+def _errors_status(errors: dict[str, int]) -> int:
+    """1 (and one line) when episodes of some row could not be evaluated, else 0."""
+    failed = {row: n for row, n in errors.items() if n}
+    if failed:
+        listed = ", ".join(f"{row}: {n}" for row, n in failed.items())
+        print(
+            f"episodes that could not be evaluated (counted as failures): {listed}", file=sys.stderr
+        )
+        return 1
     return 0
 
 
@@ -220,14 +229,8 @@ def run(args: argparse.Namespace) -> int:
     scenarios = _scenarios(args)
 
     def report(run: RowRun) -> None:
-        m = run.metrics
-        print(
-            f"{args.setup} {run.row}: SR {m.sr:.0f}% CR {m.cr_inter_arm:.0f}% "
-            f"self {m.self_collision_rate:.0f}% stuck {m.stuck_rate:.0f}% "
-            f"time {m.plan_time_ms[0]:.1f} ± {m.plan_time_ms[1]:.1f} ms, "
-            f"{run.wall_seconds:.0f} s wall",
-            file=sys.stderr,
-        )
+        line = format_metrics(run.metrics.to_dict())
+        print(f"{args.setup} {run.row}: {line}, {run.wall_seconds:.0f} s wall", file=sys.stderr)
         for arm_id, note in sorted(run.epsilon.items()):
             print(f"  {arm_id}: {note}", file=sys.stderr)
 
@@ -260,7 +263,7 @@ def run(args: argparse.Namespace) -> int:
     if bad:
         print(f"log check failed for rows {bad}: see summary.json", file=sys.stderr)
         return 1
-    return 0
+    return _errors_status({r.row: r.metrics.errors for r in runs})
 
 
 def main(argv: list[str] | None = None) -> int:

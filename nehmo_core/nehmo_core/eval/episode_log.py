@@ -14,12 +14,19 @@ Written per episode, in simulated time (``log_time`` = stamp [ns] from the episo
 ============================================ =====================================================
 
 :func:`read_episode_log` reads any log with these topics back, so a ROS recording is evaluated
-like a batch one.
+like a batch one. It applies the planners' validity rules to what it reads (a recorder stores
+whatever was published, a foreign node's garbage included): a joint state or goal must name the
+arm's joints once each with finite positions (:meth:`~nehmo_core.robots.model.RobotModel
+.joint_state`), a command must hold one finite value per joint within the velocity limits (the
+bridge's rule), a status must decode, a collision must name arms of the cell. A message that
+fails is ignored and counted per topic (:attr:`EpisodeLog.malformed`); so are the states of an
+arm that disagree at one instant (two publishers on one topic). Only a log with nothing to
+evaluate (no metadata, no goal, no instant with a valid state of every arm) is an error.
 """
 
 from __future__ import annotations
 
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -70,6 +77,9 @@ __all__ = [
 
 EPISODE_FORMAT = "nehmo-episode"
 EPISODE_FORMAT_VERSION = 1
+
+
+_ARM_TOPICS = ("joint_states", "goal", "planner/status", "velocity_controller/commands")
 
 
 class EpisodeLogError(NehmoError):
@@ -165,17 +175,55 @@ class EpisodeLog:
     statuses: dict[str, list[tuple[int, StatusRecord]]] = field(default_factory=dict)
     commands: dict[str, list[tuple[int, np.ndarray]]] = field(default_factory=dict)
     collisions: list[tuple[int, list[Collision]]] = field(default_factory=list)
+    #: messages ignored as malformed, per topic, and the first reason per topic
+    malformed: dict[str, int] = field(default_factory=dict)
+    malformed_reasons: dict[str, str] = field(default_factory=dict)
 
 
-def _ordered(msg: JointState, cell: Cell, arm_id: str, where: str) -> np.ndarray:
-    names = list(cell.arm(arm_id).robot.joint_names)
-    if list(msg.name) == names:
-        return np.asarray(msg.position, dtype=np.float64)
-    index = {n: i for i, n in enumerate(msg.name)}
-    missing = [n for n in names if n not in index]
-    if missing:
-        raise EpisodeLogError(f"{where}: joint state of {arm_id!r} lacks joints {missing}")
-    return np.array([msg.position[index[n]] for n in names], dtype=np.float64)
+class _Malformed(Exception):
+    """A message that fails the validity rules (the reason is the message)."""
+
+
+def _command(data: Any, cell: Cell, arm_id: str) -> np.ndarray:
+    robot = cell.arm(arm_id).robot
+    values = np.asarray(data, dtype=np.float64)
+    limits = np.array([j.velocity for j in robot.joints])
+    if values.shape != (robot.dof,) or not np.all(np.isfinite(values)):
+        raise _Malformed(f"needs {robot.dof} finite values, got {values.tolist()[:8]}")
+    if np.any(np.abs(values) > limits + 1e-9):
+        raise _Malformed(f"exceeds the velocity limits {limits.tolist()} rad/s")
+    return values
+
+
+def _collisions(msg: DiagnosticArray, cell: Cell) -> list[Collision]:
+    found = collisions_from_message(msg)
+    arms = set(cell.arm_ids)
+    strangers = sorted({a for c in found for a in (c.arm_a, c.arm_b)} - arms)
+    if strangers:
+        raise _Malformed(f"names arms {strangers} that are not in the cell")
+    return found
+
+
+def _decoded(rec: Any, cell: Cell, arm_id: str | None, what: str, topic: str) -> Any:
+    """The checked content of one record; raises :class:`_Malformed` with the reason."""
+    msg = rec.message
+    if rec.decode_error:
+        raise _Malformed(f"cannot be decoded ({rec.decode_error})")
+    try:
+        if arm_id is None:
+            if isinstance(msg, DiagnosticArray):
+                return _collisions(msg, cell)
+        elif what in ("joint_states", "goal") and isinstance(msg, JointState):
+            return cell.arm(arm_id).robot.joint_state(msg.name, msg.position, topic)
+        elif what == "planner/status" and isinstance(msg, DiagnosticStatus):
+            return telemetry_from_status(msg)
+        elif what == "velocity_controller/commands" and isinstance(msg, Float64MultiArray):
+            return _command(msg.data, cell, arm_id)
+    except _Malformed:
+        raise
+    except (NehmoError, ValueError, TypeError) as err:
+        raise _Malformed(str(err)) from None
+    raise _Malformed(f"is a {rec.msgtype or 'message of unknown type'}, not what {topic} carries")
 
 
 def read_episode_log(path: str | Path) -> EpisodeLog:
@@ -189,36 +237,63 @@ def read_episode_log(path: str | Path) -> EpisodeLog:
         raise EpisodeLogError(f"{p}: episode metadata lacks the cell")
     cell = cell_from_dict(metadata["cell"], source=f"{p.name}:cell")
     goals: dict[str, np.ndarray] = {}
-    by_stamp: dict[int, dict[str, np.ndarray]] = defaultdict(dict)
+    by_stamp: dict[int, dict[str, list[np.ndarray]]] = defaultdict(lambda: defaultdict(list))
     statuses: dict[str, list[tuple[int, StatusRecord]]] = {a: [] for a in cell.arm_ids}
     commands: dict[str, list[tuple[int, np.ndarray]]] = {a: [] for a in cell.arm_ids}
     collisions: list[tuple[int, list[Collision]]] = []
+    malformed: Counter[str] = Counter()
+    reasons: dict[str, str] = {}
+
+    def ignore(topic: str, count: int, why: str) -> None:
+        malformed[topic] += count
+        reasons.setdefault(topic, why)
+
     for rec in iter_log(p):
-        if rec.topic == COLLISIONS_TOPIC and isinstance(rec.message, DiagnosticArray):
-            found = collisions_from_message(rec.message)
-            if found:
-                collisions.append((rec.log_time_ns, found))
+        if rec.topic == COLLISIONS_TOPIC:
+            arm_id, what = None, ""
+        else:
+            split = split_arm_topic(rec.topic)
+            if split is None or split[0] not in statuses:
+                continue
+            arm_id, what = split
+            if what not in _ARM_TOPICS:
+                continue
+        try:
+            value = _decoded(rec, cell, arm_id, what, rec.topic)
+        except _Malformed as why:
+            ignore(rec.topic, 1, str(why))
             continue
-        split = split_arm_topic(rec.topic)
-        if split is None or split[0] not in statuses:
-            continue
-        arm_id, what = split
-        msg = rec.message
-        if what == "joint_states" and isinstance(msg, JointState):
-            by_stamp[rec.log_time_ns][arm_id] = _ordered(msg, cell, arm_id, str(p))
-        elif what == "goal" and isinstance(msg, JointState):
-            goals[arm_id] = _ordered(msg, cell, arm_id, str(p))
-        elif what == "planner/status" and isinstance(msg, DiagnosticStatus):
-            statuses[arm_id].append((rec.log_time_ns, telemetry_from_status(msg)))
-        elif what == "velocity_controller/commands" and isinstance(msg, Float64MultiArray):
-            commands[arm_id].append((rec.log_time_ns, np.asarray(msg.data, dtype=np.float64)))
+        if arm_id is None:
+            if value:
+                collisions.append((rec.log_time_ns, value))
+        elif what == "joint_states":
+            by_stamp[rec.log_time_ns][arm_id].append(value)
+        elif what == "goal":
+            goals.setdefault(arm_id, value)  # the first valid goal: the episode's
+        elif what == "planner/status":
+            statuses[arm_id].append((rec.log_time_ns, value))
+        else:
+            commands[arm_id].append((rec.log_time_ns, value))
+    states: dict[int, dict[str, np.ndarray]] = {}
+    for t, per_arm in by_stamp.items():
+        states[t] = {}
+        for arm_id, qs in per_arm.items():
+            if all(np.array_equal(q, qs[0]) for q in qs[1:]):
+                states[t][arm_id] = qs[0]
+            else:  # two publishers disagree: neither is trusted at this instant
+                ignore(
+                    joint_states_topic(arm_id),
+                    len(qs),
+                    f"{len(qs)} different states of {arm_id!r} at one time ({t} ns)",
+                )
     missing = [a for a in cell.arm_ids if a not in goals]
     if missing:
         raise EpisodeLogError(f"{p}: no goal logged for arms {missing}")
-    complete = sorted(t for t, q in by_stamp.items() if len(q) == len(cell.arms))
+    complete = sorted(t for t, q in states.items() if len(q) == len(cell.arms))
     if not complete:
-        raise EpisodeLogError(f"{p}: no instant with a joint state of every arm")
-    positions = {a: np.array([by_stamp[t][a] for t in complete]) for a in cell.arm_ids}
+        ignored = f" ({sum(malformed.values())} malformed messages ignored)" if malformed else ""
+        raise EpisodeLogError(f"{p}: no instant with a valid joint state of every arm{ignored}")
+    positions = {a: np.array([states[t][a] for t in complete]) for a in cell.arm_ids}
     return EpisodeLog(
         path=p,
         metadata=metadata,
@@ -229,4 +304,6 @@ def read_episode_log(path: str | Path) -> EpisodeLog:
         statuses=statuses,
         commands=commands,
         collisions=collisions,
+        malformed=dict(sorted(malformed.items())),
+        malformed_reasons={t: reasons[t] for t in sorted(reasons)},
     )

@@ -3,12 +3,16 @@
 Per episode (:class:`EpisodeResult`): the outcome — ``success`` (every arm within the setup's
 tolerance of its goal, before any collision and within the time limit), ``collision`` (any
 arm-arm or self-collision first) or ``stuck`` (neither by the time limit) — the joint-space
-path length [rad] (sum over arms of ``Σ‖q_{k+1} − q_k‖₂``), and every plan() call's time.
+path length [rad] (sum over arms of ``Σ‖q_{k+1} − q_k‖₂``), and every plan() call's time. An
+episode that was started but cannot be evaluated (its log is unreadable, a process crashed) is
+an ``error`` with its reason (:meth:`EpisodeResult.failed`): it stays in every denominator as a
+failure of its own kind. Messages of a log that fail the planners' validity rules are ignored
+and counted per topic (``malformed``), never fatal.
 
-Per row (:func:`aggregate`): SR, CR and stuck [%], planning time [ms] (mean ± std over the
-steps of the timed arms: the arms running an Opt planner among the setup's timed arms, else the
-timed arms; for centralized planners, one sample per episode: the plan), MPL [rad] (mean ± std
-over successful episodes), fail-safe rate and solver statuses.
+Per row (:func:`aggregate`): SR, CR, stuck and errors [%] over every episode, planning time
+[ms] (mean ± std over the steps of the timed arms: the arms running an Opt planner among the
+setup's timed arms, else the timed arms; for centralized planners, one sample per episode:
+the plan), MPL [rad] (mean ± std over successful episodes), fail-safe rate and solver statuses.
 
 :func:`evaluate_log` derives an :class:`EpisodeResult` from a log alone;
 :func:`nehmo_core.eval.episode.run_episode` derives the same result in memory.
@@ -25,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from nehmo_core.errors import NehmoError, one_line
 from nehmo_core.eval.episode_log import EpisodeLog, EpisodeLogError, read_episode_log
 from nehmo_core.eval.setups import OPT_KINDS, is_centralized
 from nehmo_core.geometry.pybullet_world import Collision
@@ -38,6 +43,8 @@ __all__ = [
     "RowMetrics",
     "aggregate",
     "evaluate_log",
+    "evaluate_or_error",
+    "format_metrics",
     "goal_distance",
     "path_lengths",
     "planning_times",
@@ -58,7 +65,7 @@ NOT_PLANNED = frozenset(
 """Statuses of a planner node's commands for which no planning ran (holds, and a missed
 deadline, whose solve time is NaN): their times are not planning times."""
 
-OUTCOMES = ("success", "collision", "stuck")
+OUTCOMES = ("success", "collision", "stuck", "error")
 
 
 @dataclass(frozen=True)
@@ -77,6 +84,36 @@ class EpisodeResult:
     collisions: tuple[Collision, ...]  # found in the colliding tick
     final_errors: dict[str, float]  # [rad] goal distance per arm at the end (setup's norm)
     metadata: dict[str, Any] = field(default_factory=dict, compare=False)  # the logged JSON
+    error: str = ""  # why an ``error`` episode could not be evaluated
+    #: messages of the log ignored as malformed: topic -> count (the first reason per topic in
+    #: ``malformed_reasons``)
+    malformed: dict[str, int] = field(default_factory=dict, compare=False)
+    malformed_reasons: dict[str, str] = field(default_factory=dict, compare=False)
+
+    @classmethod
+    def failed(
+        cls,
+        reason: str,
+        kinds: Mapping[str, str] | None = None,
+        metadata: Mapping[str, Any] | None = None,
+    ) -> EpisodeResult:
+        """An episode that was started but cannot be evaluated: outcome ``error``, ``reason``
+        kept, no measurements (it adds no planning time and no path length)."""
+        return cls(
+            outcome="error",
+            end_ns=0,
+            ticks=0,
+            path_lengths={},
+            kinds=dict(kinds or {}),
+            timed_arms=(),
+            plan_times={},
+            statuses={},
+            fail_safe={},
+            collisions=(),
+            final_errors={},
+            metadata=dict(metadata or {}),
+            error=reason or "unknown error",
+        )
 
     @property
     def end_time(self) -> float:
@@ -97,6 +134,8 @@ class EpisodeResult:
 
     def plan_time_samples(self) -> list[float]:
         """The planning times [s] this episode contributes to its row's mean ± std."""
+        if not self.timed_arms:
+            return []
         arms = [a for a in self.timed_arms if self.kinds[a] in OPT_KINDS] or list(self.timed_arms)
         if is_centralized(self.kinds):
             return [self.plan_times[arms[0]][0]] if self.plan_times[arms[0]] else []
@@ -197,7 +236,20 @@ def evaluate_log(path_or_log: str | Path | EpisodeLog) -> EpisodeResult:
             a: goal_distance(last[a], log.goals[a], log.cell, a, norm) for a in log.cell.arm_ids
         },
         metadata=meta,
+        malformed=dict(log.malformed),
+        malformed_reasons=dict(log.malformed_reasons),
     )
+
+
+def evaluate_or_error(
+    path_or_log: str | Path | EpisodeLog, kinds: Mapping[str, str] | None = None
+) -> EpisodeResult:
+    """:func:`evaluate_log`, or an ``error`` result naming why the log cannot be evaluated
+    (missing, unfinished, not an episode log, no complete state): the episode stays counted."""
+    try:
+        return evaluate_log(path_or_log)
+    except (NehmoError, OSError) as exc:
+        return EpisodeResult.failed(one_line(exc), kinds)
 
 
 @dataclass(frozen=True)
@@ -214,6 +266,9 @@ class RowMetrics:
     fail_safe_rate: float  # fail-safe commands / commands of the timed Opt arms
     statuses: dict[str, int]
     self_collisions: int = 0  # the collisions of an arm with itself only (in ``collisions``)
+    errors: int = 0  # episodes that could not be evaluated (in ``episodes``, never successes)
+    error_reasons: tuple[str, ...] = ()  # one per error episode
+    malformed: dict[str, int] = field(default_factory=dict)  # ignored messages per topic
 
     @property
     def sr(self) -> float:
@@ -239,6 +294,11 @@ class RowMetrics:
     def stuck_rate(self) -> float:
         return 100.0 * self.stuck / self.episodes if self.episodes else math.nan
 
+    @property
+    def error_rate(self) -> float:
+        """Episodes that could not be evaluated [%] (failures of their own kind)."""
+        return 100.0 * self.errors / self.episodes if self.episodes else math.nan
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "episodes": self.episodes,
@@ -251,6 +311,10 @@ class RowMetrics:
             "cr_inter_arm": self.cr_inter_arm,
             "self_collision_rate": self.self_collision_rate,
             "stuck_rate": self.stuck_rate,
+            "errors": self.errors,
+            "error_rate": self.error_rate,
+            "error_reasons": list(self.error_reasons),
+            "malformed_messages": dict(self.malformed),
             "plan_time_ms": {"mean": self.plan_time_ms[0], "std": self.plan_time_ms[1]},
             "plan_time_samples": self.plan_time_samples,
             "mpl": {"mean": self.mpl[0], "std": self.mpl[1]},
@@ -267,9 +331,16 @@ def _mean_std(x: Sequence[float]) -> tuple[float, float]:
 
 
 def aggregate(results: Sequence[EpisodeResult]) -> RowMetrics:
-    """SR, CR (all collisions, and self-collisions apart), stuck, planning time, MPL and
-    fail-safe rate over ``results``."""
+    """SR, CR (all collisions, and self-collisions apart), stuck, errors, planning time, MPL
+    and fail-safe rate over ``results``: every episode counts in the rates' denominator,
+    ``error`` episodes included."""
+    unknown = sorted({r.outcome for r in results} - set(OUTCOMES))
+    if unknown:
+        raise ValueError(f"episode outcomes must be among {OUTCOMES}, got {unknown}")
     counts = Counter(r.outcome for r in results)
+    malformed: Counter[str] = Counter()
+    for r in results:
+        malformed.update(r.malformed)
     times = [t * 1e3 for r in results for t in r.plan_time_samples()]
     mpl = [r.path_length for r in results if r.outcome == "success"]
     statuses: Counter[str] = Counter()
@@ -291,4 +362,34 @@ def aggregate(results: Sequence[EpisodeResult]) -> RowMetrics:
         fail_safe_rate=fail / calls if calls else math.nan,
         statuses=dict(statuses),
         self_collisions=sum(r.collision_kind == "self" for r in results),
+        errors=counts["error"],
+        error_reasons=tuple(r.error for r in results if r.outcome == "error"),
+        malformed=dict(sorted(malformed.items())),
     )
+
+
+def format_metrics(metrics: Mapping[str, Any] | None) -> str:
+    """One line of a row's metrics (:meth:`RowMetrics.to_dict`), naming errors and ignored
+    malformed messages when there are any."""
+    if metrics is None or not metrics.get("episodes"):
+        return "no episode was run"
+    n = metrics["episodes"]
+    pt, mpl = metrics["plan_time_ms"], metrics["mpl"]
+    line = (
+        f"SR {metrics['sr']:.0f} % ({metrics['successes']} of {n})"
+        f"  CR {metrics.get('cr_inter_arm', metrics['cr']):.0f} %"
+        f"  self {metrics.get('self_collision_rate', 0.0):.0f} %"
+        f"  stuck {metrics['stuck_rate']:.0f} %"
+        f"  plan time {pt['mean']:.2f} ± {pt['std']:.2f} ms  MPL {mpl['mean']:.2f} rad"
+        f"  ({n} episode{'s' if n != 1 else ''})"
+    )
+    reasons = list(metrics.get("error_reasons") or [])
+    if metrics.get("errors"):
+        grouped = Counter(reasons)
+        listed = "; ".join(f"{r}" + (f" (x{c})" if c > 1 else "") for r, c in grouped.items())
+        line += f" · {metrics['errors']} error{'s' if metrics['errors'] != 1 else ''}: {listed}"
+    malformed = metrics.get("malformed_messages") or {}
+    if malformed:
+        listed = ", ".join(f"{t}: {c:,}" for t, c in malformed.items())
+        line += f" · malformed messages ignored: {listed}"
+    return line

@@ -12,7 +12,14 @@ from typing import Any
 from nehmo_core.eval.batch import RowRun
 from nehmo_core.eval.paper import PAPER_NOTES, paper_row
 
-__all__ = ["json_safe", "markdown_table", "row_summary", "setup_summary", "write_summary"]
+__all__ = [
+    "error_notes",
+    "json_safe",
+    "markdown_table",
+    "row_summary",
+    "setup_summary",
+    "write_summary",
+]
 
 
 def json_safe(x: Any) -> Any:
@@ -57,6 +64,7 @@ def row_summary(setup: str, run: RowRun) -> dict[str, Any]:
                 "end_time": r.end_time,
                 "path_length": r.path_length,
                 "log": str(path),
+                "error": r.error,
             }
             for r, path in zip(run.results, run.logs, strict=True)
         ],
@@ -108,8 +116,10 @@ def markdown_table(summary: Mapping[str, Any]) -> str:
         time_ms = f"{_pm(ours['plan_time_ms'], digits)} ({_pm(paper.get('time_ms'), digits)})"
         mpl = f"{_pm(ours['mpl'])} ({_pm(paper.get('mpl'))})"
         fs = ours["fail_safe_rate"]
+        errors = ours.get("errors") or 0
+        episodes = f"{ours['episodes']}" + (f" ({errors} errors)" if errors else "")
         lines.append(
-            f"| {row['row']} | {ours['episodes']} | {sr} | {cr} | {own} "
+            f"| {row['row']} | {episodes} | {sr} | {cr} | {own} "
             f"| {_pct(ours['stuck_rate'])} "
             f"| {time_ms} | {mpl} | {'–' if fs is None else f'{100 * fs:.0f}%'} "
             f"| {row['log_check']} |"
@@ -120,6 +130,7 @@ def markdown_table(summary: Mapping[str, Any]) -> str:
         "ending in an arm's collision with itself (the authors' code counts these as collisions "
         "too). Either ends the episode.",
     ]
+    lines += error_notes(summary["rows"])
     notes = [r["paper"]["note"] for r in summary["rows"] if r["paper"] and r["paper"]["note"]]
     if notes:
         lines += ["", *(f"Paper: {n}." for n in notes)]
@@ -128,6 +139,24 @@ def markdown_table(summary: Mapping[str, Any]) -> str:
             pairs = "; ".join(f"{a}: {', '.join(p)}" for a, p in row["unmodelled_peers"].items())
             lines += ["", f"{row['row']}: peers not constrained (no pair model fits): {pairs}."]
     return "\n".join(lines) + "\n"
+
+
+def error_notes(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Lines naming each row's error episodes and malformed messages (nothing when none)."""
+    lines = []
+    for row in rows:
+        ours = row["ours"]
+        if ours.get("errors"):
+            reasons = "; ".join(dict.fromkeys(ours.get("error_reasons") or []))
+            lines += [
+                "",
+                f"{row['row']}: {ours['errors']} of {ours['episodes']} episodes could not be "
+                f"evaluated (counted as failures): {reasons}.",
+            ]
+        if ours.get("malformed_messages"):
+            listed = ", ".join(f"{t}: {n:,}" for t, n in ours["malformed_messages"].items())
+            lines += ["", f"{row['row']}: malformed messages ignored: {listed}."]
+    return lines
 
 
 def write_summary(out_dir: str | Path, summary: Mapping[str, Any], stem: str = "summary") -> Path:

@@ -7,27 +7,32 @@ follows our rule (every arm within 0.1 rad, joint-space L2 norm, of its goal at 
 time limit, no collision); the episodes last :data:`TIME_LIMIT` s like theirs. Tasks with
 obstacles are listed and skipped: the planners model arms only.
 
-``OUT/summary.json`` keeps the setups' row schema (``rows[].row``, ``rows[].ours`` …) and adds
-``rows[].by_arms``: the same metrics per arm count.
+A task whose episode raises or whose log cannot be read stays in its row as an ``error``
+(a failure with its reason); the row goes on. ``OUT/summary.json`` keeps the setups' row
+schema (``rows[].row``, ``rows[].ours`` …) and adds ``rows[].by_arms``: the same metrics per
+arm count.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import platform
+import sys
 import time
+import traceback
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from nehmo_core.errors import one_line
 from nehmo_core.eval.batch import init_worker
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.ha_tasks import HaTask, check_joint_convention, pair_distances
-from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log
+from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_or_error
 from nehmo_core.eval.planners import build_planners, unmodelled_peers
-from nehmo_core.eval.report import json_safe
+from nehmo_core.eval.report import error_notes, json_safe
 from nehmo_core.eval.setups import OPT_KINDS, parse_row, row_slug
 from nehmo_core.logs import remove_bag
 from nehmo_core.planning.models import ModelRegistry, ValueModelSource
@@ -82,6 +87,20 @@ def _log_path(config: TaskConfig, row: str, task: HaTask) -> Path:
 
 
 def _run(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult, dict[str, Any]]:
+    """One task's episode in a worker; an exception becomes an ``error`` result."""
+    try:
+        return _episode(config, row, task)
+    except Exception as exc:
+        reason = f"{type(exc).__name__}: {one_line(exc)}"
+        print(
+            f"task {task.task_id} of row {row!r} failed: {reason}\n{traceback.format_exc()}",
+            file=sys.stderr,
+            flush=True,
+        )
+        return EpisodeResult.failed(reason), {"value_models": {}, "unmodelled_peers": {}}
+
+
+def _episode(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult, dict[str, Any]]:
     cell, settings = task.cell, config.episode
     kinds = parse_row(row, cell)
     registry = _registry(config)
@@ -154,15 +173,21 @@ def run_tasks(
             used: dict[str, Any] = {"value_models": {}, "unmodelled_peers": {}, "epsilon": {}}
             with tqdm(total=len(runnable), desc=f"tasks {row}", disable=not progress) as bar:
                 if executor is None:
-                    outputs: Any = (_run(config, row, t) for t in runnable)
+                    outputs: Any = ((t.task_id, _run(config, row, t)) for t in runnable)
                 else:
-                    futures = [executor.submit(_run, config, row, t) for t in runnable]
-                    outputs = (f.result() for f in as_completed(futures))
-                for _, extra in outputs:
+                    futures = {executor.submit(_run, config, row, t): t.task_id for t in runnable}
+                    outputs = ((futures[f], f.result()) for f in as_completed(futures))
+                failed: dict[str, EpisodeResult] = {}
+                for task_id, (result, extra) in outputs:
+                    if result.outcome == "error":
+                        failed[task_id] = result
                     for key in ("value_models", "unmodelled_peers"):
                         used[key].update(extra[key])
                     bar.update(1)
-            results = [evaluate_log(_log_path(config, row, t)) for t in runnable]
+            results = [
+                failed.get(t.task_id) or evaluate_or_error(_log_path(config, row, t))
+                for t in runnable
+            ]
             summary = _row_summary(config, row, runnable, results, used, time.perf_counter() - t0)
             summaries.append(summary)
             if on_row is not None:
@@ -201,6 +226,7 @@ def _row_summary(
                 "collision": r.collision_kind,
                 "end_time": r.end_time,
                 "log": str(_log_path(config, row, t)),
+                "error": r.error,
             }
             for t, r in zip(tasks, results, strict=True)
         ],
@@ -245,8 +271,8 @@ def markdown(summary: dict[str, Any]) -> str:
     lines = [
         f"### Ha et al.'s tasks ({summary['tasks']} files, {len(summary['skipped'])} skipped)",
         "",
-        f"| planners | tasks | SR % | CR % | stuck % | {head} |",
-        "|---|---|---|---|---|" + "---|" * len(counts),
+        f"| planners | tasks | SR % | CR % | stuck % | errors | {head} |",
+        "|---|---|---|---|---|---|" + "---|" * len(counts),
     ]
     for row in summary["rows"]:
         ours = row["ours"]
@@ -256,8 +282,9 @@ def markdown(summary: dict[str, Any]) -> str:
             cells.append("–" if m is None else f"{m['sr']:.0f} / {m['cr_inter_arm']:.0f}")
         lines.append(
             f"| {row['row']} | {ours['episodes']} | {ours['sr']:.0f} | {ours['cr_inter_arm']:.0f} "
-            f"| {ours['stuck_rate']:.0f} | {' | '.join(cells)} |"
+            f"| {ours['stuck_rate']:.0f} | {ours.get('errors', 0)} | {' | '.join(cells)} |"
         )
+    lines += error_notes(summary["rows"])
     lines += ["", f"Success: {summary['success_rule']}."]
     if summary["skipped"]:
         listed = ", ".join(f"{s['task']} ({s['reason']})" for s in summary["skipped"])

@@ -32,6 +32,7 @@ class LogRecord:
     sequence: int
     data: bytes = field(repr=False)
     message: Any
+    decode_error: str = ""  # why the bytes do not decode as ``msgtype`` (``message`` is None)
 
 
 @dataclass(frozen=True)
@@ -88,6 +89,16 @@ def _decode(msgtype: str, data: bytes) -> Any:
     return deserialize(data, msgtype)
 
 
+def _open(make_reader: Any, stream: Any, file: Path) -> Any:
+    """An MCAP reader of ``stream``, or :class:`LogFileError` naming ``file``."""
+    try:
+        return make_reader(stream)
+    except Exception as err:  # mcap raises several unrelated types on files that are not MCAP
+        raise LogFileError(
+            f"{file}: not a readable MCAP log ({type(err).__name__}: {err})"
+        ) from None
+
+
 def iter_log(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[LogRecord]:
     """Every message of a finished log in log-time order (per file), optionally only `topics`."""
     from mcap.reader import make_reader
@@ -95,10 +106,14 @@ def iter_log(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[
     wanted = list(topics) if topics else None
     for file in bag_files(path):
         with file.open("rb") as stream:
-            reader = make_reader(stream)
+            reader = _open(make_reader, stream, file)
             try:
                 for schema, channel, message in reader.iter_messages(topics=wanted):
                     msgtype = schema.name if schema is not None else ""
+                    try:
+                        decoded, why = _decode(msgtype, message.data), ""
+                    except Exception as err:  # one undecodable message; the log goes on
+                        decoded, why = None, f"{type(err).__name__}: {err}"
                     yield LogRecord(
                         topic=channel.topic,
                         msgtype=msgtype,
@@ -106,7 +121,8 @@ def iter_log(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[
                         publish_time_ns=message.publish_time,
                         sequence=message.sequence,
                         data=bytes(message.data),
-                        message=_decode(msgtype, message.data),
+                        message=decoded,
+                        decode_error=why,
                     )
             except NehmoError:
                 raise
@@ -127,7 +143,7 @@ def summarize(path: str | Path) -> LogSummary:
     start, end, count, profile = None, 0, 0, ""
     for file in bag_files(path):
         with file.open("rb") as stream:
-            reader = make_reader(stream)
+            reader = _open(make_reader, stream, file)
             try:
                 profile = reader.get_header().profile
                 summary = reader.get_summary()

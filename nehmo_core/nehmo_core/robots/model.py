@@ -114,6 +114,29 @@ class RobotModel:
             )
         return arr
 
+    def joint_state(
+        self, names: Sequence[str], position: Sequence[float], parameter: str
+    ) -> FloatArray:
+        """Positions of a JointState in this robot's joint order, checked: by ``names`` when
+        given (each joint once, one position per name), else as they come; ``dof`` finite
+        values. The rule every reader of joint states applies (the planners' state buffer,
+        goals, the episode-log reader); raises :class:`InvalidValueError` naming
+        ``parameter``."""
+        values = np.asarray(list(position), dtype=np.float64)
+        if names:
+            names = list(names)
+            if len(values) == len(names) and names == list(self.joint_names):
+                return self.check_q(values, parameter)  # in the robot's order already
+            if sorted(names) != sorted(self.joint_names) or len(values) != len(names):
+                raise InvalidValueError(
+                    parameter,
+                    f"must name the joints of robot '{self.name}' {list(self.joint_names)} "
+                    "once each, with one position per name",
+                    {"name": names, "position": values.tolist()},
+                )
+            values = values[[names.index(j) for j in self.joint_names]]
+        return self.check_q(values, parameter)
+
     def wrap(self, q: ArrayLike) -> FloatArray:
         """Wrap continuous joints to (−π, π]; other joints unchanged."""
         arr = np.array(q, dtype=np.float64)
