@@ -436,7 +436,7 @@ def test_one_line_summaries_give_the_papers_cr_and_self_collisions_apart() -> No
         "self_collision_rate": 50.0,
         "stuck_rate": 0.0,
         "plan_time_ms": {"mean": 1.0, "std": 0.5},
-        "mpl": {"mean": 2.0},
+        "mpl": {"mean": 2.0, "std": 0.0},
         "episodes": 2,
     }
     assert format_metrics(metrics).startswith("SR 50 % (1 of 2)  CR 0 %  self 50 %  stuck 0 %")

@@ -374,13 +374,19 @@ def format_metrics(metrics: Mapping[str, Any] | None) -> str:
     if metrics is None or not metrics.get("episodes"):
         return "no episode was run"
     n = metrics["episodes"]
-    pt, mpl = metrics["plan_time_ms"], metrics["mpl"]
+
+    def pm(pair: Mapping[str, Any], unit: str) -> str:
+        mean, std = pair.get("mean"), pair.get("std")
+        if mean is None or not math.isfinite(mean):
+            return "–"
+        return f"{mean:.2f} ± {std:.2f} {unit}"
+
     line = (
         f"SR {metrics['sr']:.0f} % ({metrics['successes']} of {n})"
         f"  CR {metrics.get('cr_inter_arm', metrics['cr']):.0f} %"
         f"  self {metrics.get('self_collision_rate', 0.0):.0f} %"
         f"  stuck {metrics['stuck_rate']:.0f} %"
-        f"  plan time {pt['mean']:.2f} ± {pt['std']:.2f} ms  MPL {mpl['mean']:.2f} rad"
+        f"  plan time {pm(metrics['plan_time_ms'], 'ms')}  MPL {pm(metrics['mpl'], 'rad')}"
         f"  ({n} episode{'s' if n != 1 else ''})"
     )
     reasons = list(metrics.get("error_reasons") or [])
