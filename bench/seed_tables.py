@@ -54,9 +54,10 @@ SEED_NOTES: dict[int, str] = {
 
 
 def _cell(o: dict[str, Any]) -> str:
+    errors = o.get("errors") or 0  # episodes that could not be evaluated: failures, counted
     return (
         f"{o['sr']:.0f} / {o['cr_inter_arm']:.0f} / {o['self_collision_rate']:.0f} / "
-        f"{o['stuck_rate']:.0f}"
+        f"{o['stuck_rate']:.0f}" + (f" ({errors} errors)" if errors else "")
     )
 
 
@@ -68,7 +69,8 @@ def _pooled(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "self_collision_rate": sum(r["self_collisions"] for r in rows),
         "stuck_rate": sum(r["stuck"] for r in rows),
     }
-    return {"episodes": n, **{k: 100.0 * v / n for k, v in share.items()}}
+    errors = sum(r.get("errors") or 0 for r in rows)
+    return {"episodes": n, "errors": errors, **{k: 100.0 * v / n for k, v in share.items()}}
 
 
 def _met(target: tuple[float, float] | None, runs: list[dict[str, Any]]) -> str:

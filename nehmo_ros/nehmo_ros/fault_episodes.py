@@ -188,7 +188,14 @@ def run_rows(
             started = time.monotonic()
             episodes = []
             for i, scenario in enumerate(scenarios.scenarios):
-                episodes.append(run_fault_episode(cell, scenario, planners, row, sim, es))
+                try:
+                    episode = run_fault_episode(cell, scenario, planners, row, sim, es)
+                except Exception as err:  # counted as a failure of its own kind; go on
+                    episode = {
+                        "outcome": "error",
+                        "error": f"{type(err).__name__}: {one_line(err)}",
+                    }
+                episodes.append(episode)
                 if progress:
                     print(
                         f"{row.fault}/{row.policy} {i + 1}/{count}: {episodes[-1]['outcome']}",
@@ -203,6 +210,7 @@ def run_rows(
                     "cr": 100.0 * outcomes["collision"] / count,
                     "sr": 100.0 * outcomes["success"] / count,
                     "stuck": 100.0 * outcomes["stuck"] / count,
+                    "errors": 100.0 * outcomes["error"] / count,
                     "wall_seconds": round(time.monotonic() - started, 1),
                 }
             )
@@ -215,13 +223,14 @@ def markdown(result: Mapping[str, Any]) -> str:
         f"dual_ur5, {len(result['indices'])} scenarios (seed {result['seed']}, naive collides), "
         f"victim nehmo ({result['model']}), peer {result['peer_planner']}",
         "",
-        "| fault | victim policy | CR % | SR % | stuck % |",
-        "|---|---|---|---|---|",
+        "| fault | victim policy | CR % | SR % | stuck % | errors % |",
+        "|---|---|---|---|---|---|",
     ]
     for r in result["rows"]:
         policy = "—" if r["fault"] == "none" else r["policy"]
         lines.append(
-            f"| {r['fault']} | {policy} | {r['cr']:.1f} | {r['sr']:.1f} | {r['stuck']:.1f} |"
+            f"| {r['fault']} | {policy} | {r['cr']:.1f} | {r['sr']:.1f} | {r['stuck']:.1f} "
+            f"| {r.get('errors', 0.0):.1f} |"
         )
     return "\n".join(lines) + "\n"
 
