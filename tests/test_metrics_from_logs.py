@@ -32,11 +32,13 @@ from nehmo_core.logs import (
     Header,
     JointState,
     KeyValue,
+    String,
     command_topic,
+    goal_topic,
     joint_states_topic,
     status_topic,
 )
-from nehmo_core.logs.topics import COLLISIONS_TOPIC
+from nehmo_core.logs.topics import COLLISIONS_TOPIC, SCENARIO_TOPIC
 from nehmo_core.planning.interface import Telemetry
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenarios import generate_scenario_set
@@ -72,6 +74,9 @@ STATUSES = [
 
 def _write_log(path: Path, garbage: bool = False) -> Path:
     with EpisodeLogWriter(path, CELL) as log:
+        if garbage:  # another publisher's scenario messages, before the episode's own
+            log._log.write(SCENARIO_TOPIC, String(data="not json {"), 0)
+            log._log.write(SCENARIO_TOPIC, String(data='{"format": "other"}'), 0)
         log.scenario(
             {
                 "cell": {
@@ -85,8 +90,11 @@ def _write_log(path: Path, garbage: bool = False) -> Path:
                 "timed_arms": list(CELL.arm_ids),
                 "control": {"period_ns": PERIOD, "max_ticks": 10},
                 "success": {"norm": "l2", "tolerance": 0.1},
+                "goal": {a: q.tolist() for a, q in GOALS.items()},
             }
         )
+        if garbage:  # a well-formed goal from another publisher first: the metadata decides
+            log._log.write(goal_topic("ur5_1"), _state(JOINTS, [2.0] * 6, 0), 0)
         log.goals(GOALS)
         for k in range(4):
             q = {a: TRAJECTORY[a][k] for a in CELL.arm_ids}
@@ -139,6 +147,8 @@ def _write_garbage(log: EpisodeLogWriter) -> None:
         values=[KeyValue(key="planner", value="nehmo")],
     )
     raw.write(status_topic("ur5_1"), bare, 60 * MS)
+    negative = status_message("ur5_1", "nehmo", Telemetry(-1.0, "optimal"), 40 * MS)
+    raw.write(status_topic("ur5_1"), negative, 60 * MS)
     ghost = collisions_message([Collision("ur5_0", "wrist", "ghost_arm", "base", -0.1)], 60 * MS)
     raw.write(COLLISIONS_TOPIC, ghost, 60 * MS)
 
@@ -176,8 +186,9 @@ def test_malformed_messages_are_ignored_and_counted_per_topic(tmp_path: Path) ->
         # NaN, inf, three joints, unknown names, undecodable bytes; the 1e9 state and the
         # bridge's state it disagrees with at 40 ms
         joint_states_topic("ur5_1"): 7,
-        status_topic("ur5_1"): 1,
+        status_topic("ur5_1"): 2,  # one lacks its fields, one has a negative solve time
         command_topic("ur5_1"): 3,
+        SCENARIO_TOPIC: 2,
     }
     assert "finite" in dirty.malformed_reasons[joint_states_topic("ur5_1")]
     m = aggregate([clean, dirty])

@@ -26,6 +26,8 @@ evaluate (no metadata, no goal, no instant with a valid state of every arm) is a
 
 from __future__ import annotations
 
+import json
+import math
 from collections import Counter, defaultdict
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -47,6 +49,7 @@ from nehmo_core.geometry.pybullet_world import Collision
 from nehmo_core.logs import (
     CLOCK_TOPIC,
     COLLISIONS_TOPIC,
+    SCENARIO_TOPIC,
     Clock,
     DiagnosticArray,
     DiagnosticStatus,
@@ -54,11 +57,11 @@ from nehmo_core.logs import (
     Header,
     JointState,
     LogWriter,
+    String,
     command_topic,
     goal_topic,
     iter_log,
     joint_states_topic,
-    read_scenario,
     status_topic,
 )
 from nehmo_core.logs.topics import split_arm_topic
@@ -216,7 +219,11 @@ def _decoded(rec: Any, cell: Cell, arm_id: str | None, what: str, topic: str) ->
         elif what in ("joint_states", "goal") and isinstance(msg, JointState):
             return cell.arm(arm_id).robot.joint_state(msg.name, msg.position, topic)
         elif what == "planner/status" and isinstance(msg, DiagnosticStatus):
-            return telemetry_from_status(msg)
+            record = telemetry_from_status(msg)
+            solve = record.telemetry.solve_time
+            if record.observation_ns < 0 or solve < 0 or math.isinf(solve):
+                raise _Malformed(f"observation {record.observation_ns} ns, solve time {solve} s")
+            return record
         elif what == "velocity_controller/commands" and isinstance(msg, Float64MultiArray):
             return _command(msg.data, cell, arm_id)
     except _Malformed:
@@ -226,12 +233,27 @@ def _decoded(rec: Any, cell: Cell, arm_id: str | None, what: str, topic: str) ->
     raise _Malformed(f"is a {rec.msgtype or 'message of unknown type'}, not what {topic} carries")
 
 
+def _episode_metadata(path: Path) -> tuple[dict[str, Any] | None, int]:
+    """The first message on ``/nehmo/scenario`` that is this format's JSON object, and how
+    many other messages came before it (another publisher's)."""
+    others = 0
+    for record in iter_log(path, [SCENARIO_TOPIC]):
+        try:
+            value = json.loads(record.message.data) if isinstance(record.message, String) else None
+        except (ValueError, TypeError):
+            value = None
+        if isinstance(value, dict) and value.get("format") == EPISODE_FORMAT:
+            return value, others
+        others += 1
+    return None, others
+
+
 def read_episode_log(path: str | Path) -> EpisodeLog:
     """Read an episode log (bag directory, or a bare ``.mcap`` file) written by
     :class:`EpisodeLogWriter` or a recorder (same topics)."""
     p = Path(path)
-    metadata = read_scenario(p)
-    if metadata is None or metadata.get("format") != EPISODE_FORMAT:
+    metadata, foreign = _episode_metadata(p)
+    if metadata is None:
         raise EpisodeLogError(f"{p}: no {EPISODE_FORMAT!r} metadata on /nehmo/scenario")
     if "cell" not in metadata:
         raise EpisodeLogError(f"{p}: episode metadata lacks the cell")
@@ -247,6 +269,15 @@ def read_episode_log(path: str | Path) -> EpisodeLog:
     def ignore(topic: str, count: int, why: str) -> None:
         malformed[topic] += count
         reasons.setdefault(topic, why)
+
+    if foreign:
+        ignore(SCENARIO_TOPIC, foreign, "not the episode's metadata (JSON of another format)")
+    for arm_id, q in (metadata.get("goal") or {}).items():  # the episode's own goals
+        if arm_id in statuses:
+            try:
+                goals[arm_id] = cell.arm(arm_id).robot.check_q(q, f"metadata goal of {arm_id}")
+            except (NehmoError, ValueError, TypeError) as err:
+                raise EpisodeLogError(f"{p}: {err}") from None
 
     for rec in iter_log(p):
         if rec.topic == COLLISIONS_TOPIC:
@@ -269,7 +300,7 @@ def read_episode_log(path: str | Path) -> EpisodeLog:
         elif what == "joint_states":
             by_stamp[rec.log_time_ns][arm_id].append(value)
         elif what == "goal":
-            goals.setdefault(arm_id, value)  # the first valid goal: the episode's
+            goals.setdefault(arm_id, value)  # when the metadata has none: the first valid one
         elif what == "planner/status":
             statuses[arm_id].append((rec.log_time_ns, value))
         else:
