@@ -73,25 +73,55 @@ def _lp_second(own: np.ndarray, peer: np.ndarray, values: np.ndarray, floor: flo
     return float(-res.fun + limits[1])
 
 
+SLACK = 0.005  # [m] fail_safe_slack in the lexicographic tests
+
+
+def _lexicographic_case(
+    seed: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, int, float, float]:
+    """Two pairs where the order matters, found by HiGHS alone: the worst pair binds at the
+    maximin optimum ``best`` while the other does not (it is free to take more), and giving up
+    ``SLACK`` on the worst pair buys the other at least 1 mm more. Returns own, peer, values,
+    best, the worst pair's index, the other pair's value at the maximin optimum (``forced``) and
+    its lexicographic optimum (``second``)."""
+    rng = np.random.default_rng(100 + seed)
+    for _ in range(200):
+        own, peer = rng.normal(size=(2, 6)), rng.uniform(0.0, 1.0, size=(2, 6))
+        own[0] *= rng.uniform(0.01, 1.0)  # a pair the arm can barely move, now and then
+        values = rng.uniform(0.0, 0.1, size=2)
+        best = _lp_optimum(own, peer, values)
+        # each pair's own maximum over the box: V + τ·(ū‖g‖₁ − d̄‖h‖₁)
+        alone = values + TAU * (U * np.abs(own).sum(axis=1) - D * np.abs(peer).sum(axis=1))
+        worst = int(np.argmin(alone))
+        if alone[worst] > best + 1e-6:  # both pairs bind at the optimum: nothing to order
+            continue
+        order = [worst, 1 - worst]
+        forced = _lp_second(own[order], peer[order], values[order], best - 1e-9)
+        second = _lp_second(own[order], peer[order], values[order], best - SLACK)
+        if forced > best + 1e-3 and second > forced + 1e-3:
+            return own, peer, values, best, worst, forced, second
+    raise AssertionError(f"seed {seed}: no two-pair case where the order matters")
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_the_lexicographic_command_gives_up_at_most_slack_on_the_worst_pair(seed: int) -> None:
-    rng = np.random.default_rng(100 + seed)
-    own, peer = rng.normal(size=(2, 6)), rng.uniform(0.0, 1.0, size=(2, 6))
-    own[0] *= rng.uniform(0.01, 1.0)  # a pair the arm can barely move, now and then
-    values = rng.uniform(0.0, 0.1, size=2)
-    slack = 0.005
-    best = _lp_optimum(own, peer, values)
-    predicted = _predicted(
-        maximin_command(own, peer, U, D, values, TAU, slack=slack), own, peer, values
-    )
-    assert predicted.min() >= best - slack - 2e-4
-    # the pair that binds at the optimum is held within slack; the other gets the most it can
-    worst = int(
-        np.argmin(_predicted(maximin_command(own, peer, U, D, values, TAU), own, peer, values))
-    )
-    order = [worst, 1 - worst]
-    second = _lp_second(own[order], peer[order], values[order], best - slack)
-    assert predicted[1 - worst] >= second - 2e-4 or predicted[1 - worst] >= predicted[worst] - 2e-4
+    own, peer, values, best, worst, forced, second = _lexicographic_case(seed)
+
+    def lexicographic(predicted: np.ndarray) -> bool:
+        """The worst pair within SLACK of the maximin optimum, the other at its best then."""
+        return bool(
+            predicted[worst] >= best - SLACK - 2e-4 and predicted[1 - worst] >= second - 2e-4
+        )
+
+    lexi = _predicted(maximin_command(own, peer, U, D, values, TAU, slack=SLACK), own, peer, values)
+    assert lexicographic(lexi), (lexi, best, second)
+    assert lexi.min() >= best - SLACK - 2e-4
+    # plain maximin (the slack ignored) holds the worst pair at the optimum, so the other gets
+    # no more than it can have then: the check above tells it apart
+    plain = _predicted(maximin_command(own, peer, U, D, values, TAU), own, peer, values)
+    assert plain[worst] == pytest.approx(best, abs=2e-4)
+    assert plain[1 - worst] <= forced + 2e-4
+    assert not lexicographic(plain), (plain, best, second)
 
 
 def test_an_arm_does_not_sacrifice_a_pair_it_controls_for_one_it_cannot() -> None:

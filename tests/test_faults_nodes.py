@@ -168,17 +168,12 @@ def _warnings(text: str, pattern: str) -> list[str]:
 
 
 # ------------------------------------------------------------------------------ peer faults
-PHASES = [  # (name, seconds): what the peer ur5_1 sends, one after the other
-    ("normal", 2.0),
-    ("nan", 1.2),
-    ("normal", 1.5),
-    ("short", 1.2),
-    ("normal", 1.5),
-    ("teleport", 1.2),
-    ("normal", 1.5),
-    ("silent", 1.2),
-    ("normal", 2.0),
-]
+#: What the peer ur5_1 sends, one phase after the other. A phase ends on what the planner
+#: reports, not on a timer (see :class:`PeerScript`).
+PHASES = ["normal", "nan", "normal", "short", "normal", "teleport", "normal", "silent", "normal"]
+NORMAL_PLANS = 10  # a normal phase ends once this many statuses were planned from its states
+FAULT_STATUSES = 15  # a fault ends this many statuses after the planner first reported it
+PHASE_DEADLINE = 30.0  # [s] a phase whose event never comes ends anyway (the tests then fail)
 
 
 #: The status key that names the peer while each fault lasts.
@@ -190,36 +185,23 @@ FAULT_KEY = {
 }
 
 
-def _phase_at(t: float) -> int:
-    """The position in PHASES of the phase at ``t`` [s] after the script start (the last
-    phase goes on after its end)."""
-    start = 0.0
-    for k, (_, seconds) in enumerate(PHASES):
-        if t < start + seconds:
-            return k
-        start += seconds
-    return len(PHASES) - 1
-
-
 @dataclass
 class PeerLog:
     """What the scripted peer ur5_1 did: the wall time [ns] at which each phase of PHASES
     began (every joint state of a phase went out after its start and before the next phase's
-    start) and how many joint states it published in each."""
+    start), how many joint states it published in each, and the phases that ended at
+    PHASE_DEADLINE because the planner never showed what ends them."""
 
     starts: list[int] = field(default_factory=list)
     sent: list[int] = field(default_factory=list)
-
-    def enter(self, k: int) -> None:
-        while len(self.starts) <= k:  # a phase the World's timer skipped starts with the next
-            self.starts.append(time.time_ns())
-            self.sent.append(0)
+    timed_out: list[str] = field(default_factory=list)
+    done: bool = False  # the last phase's event came: the script has run through
 
 
 def _first_report(statuses: list[Status], log: PeerLog, k: int) -> int | None:
     """Index of the first status planned from observations made after phase ``k`` began that
     names ur5_1 under the key of that phase's fault (None: there is none)."""
-    key = FAULT_KEY[PHASES[k][0]]
+    key = FAULT_KEY[PHASES[k]]
     return next(
         (
             i
@@ -230,50 +212,87 @@ def _first_report(statuses: list[Status], log: PeerLog, k: int) -> int | None:
     )
 
 
-@pytest.fixture(scope="module")
-def peer_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[World, PeerLog, str, int]:
-    """One planner (ur5_0) while its peer ur5_1 goes through PHASES; a goal outside the joint
-    limits arrives in the last normal phase."""
-    cell = load_cell("dual_ur5")
-    start, goals = _scenario(cell)
-    world = World(cell, start, {"ur5_0": goals["ur5_0"]})
-    peer_names = world.names("ur5_1")
-    log = PeerLog()
+@dataclass
+class PeerScript:
+    """The joint states ur5_1 shows in each phase. A normal phase ends once the planner has
+    planned NORMAL_PLANS times from observations made in it; a fault ends FAULT_STATUSES
+    statuses after the planner's first report of it (a silence lasts at least peer_timeout,
+    since only then is it reported): the fault windows follow the planner's own evidence, so a
+    slow machine stretches them instead of cutting them short."""
 
-    def peer(t: float) -> tuple[list[str], list[float]] | str | None:
-        k = _phase_at(t)
-        log.enter(k)
-        phase = PHASES[k][0]
+    world: World
+    log: PeerLog
+    k: int = 0
+    since: float = 0.0  # [s] script time at which phase k began
+
+    def _ended(self) -> bool:
+        statuses = self.world.statuses["ur5_0"]
+        start = self.log.starts[self.k]
+        if PHASES[self.k] == "normal":
+            planned = [s for s in statuses if s.observation_ns >= start and s.message in PLANNED]
+            return len(planned) >= NORMAL_PLANS
+        first = _first_report(statuses, self.log, self.k)
+        return first is not None and len(statuses) - first >= FAULT_STATUSES
+
+    def __call__(self, t: float) -> tuple[list[str], list[float]] | str | None:
+        if not self.log.starts:
+            self._enter(t)
+        elif not self.log.done:
+            ended = self._ended()
+            if not ended and t - self.since > PHASE_DEADLINE:
+                self.log.timed_out.append(f"{self.k}:{PHASES[self.k]}")
+                ended = True
+            if ended and self.k == len(PHASES) - 1:
+                self.log.done = True  # the last phase goes on
+            elif ended:
+                self.k += 1
+                self._enter(t)
+        phase = PHASES[self.k]
         if phase != "silent":
-            log.sent[k] += 1  # the World publishes what this returns right away
-        q = [float(x) for x in world.q["ur5_1"]]
+            self.log.sent[self.k] += 1  # the World publishes what this returns right away
+        names = self.world.names("ur5_1")
+        q = [float(x) for x in self.world.q["ur5_1"]]
         if phase == "nan":
-            return peer_names, [math.nan, *q[1:]]
+            return names, [math.nan, *q[1:]]
         if phase == "short":
-            return peer_names[:5], q[:5]
+            return names[:5], q[:5]
         if phase == "teleport":
-            return peer_names, [q[0] + 0.8, q[1] + 0.5, *q[2:]]
+            return names, [q[0] + 0.8, q[1] + 0.5, *q[2:]]
         if phase == "silent":
             return "silent"
         return None
 
-    world.scripts["ur5_1"] = peer
+    def _enter(self, t: float) -> None:
+        self.since = t
+        self.log.starts.append(time.time_ns())
+        self.log.sent.append(0)
+
+
+@pytest.fixture(scope="module")
+def peer_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[World, PeerLog, str, int]:
+    """One planner (ur5_0) while its peer ur5_1 goes through PHASES; a goal outside the joint
+    limits arrives once the last phase is under way."""
+    cell = load_cell("dual_ur5")
+    start, goals = _scenario(cell)
+    world = World(cell, start, {"ur5_0": goals["ur5_0"]})
+    log = PeerLog()
+    world.scripts["ur5_1"] = PeerScript(world, log)
     proc = _planner("ur5_0", "dual_ur5", tmp_path_factory.mktemp("peer") / "planner.log")
     try:
         started = world.spin(STARTUP_S, lambda: len(world.statuses["ur5_0"]) >= 10)
         assert started, proc.output()[-3000:]
         world.script_start = time.monotonic()
-        total = sum(s for _, s in PHASES)
-        world.spin(total - 1.0)
+        finished = world.spin(PHASE_DEADLINE * (len(PHASES) + 1), lambda: log.done)
         world.publish_goal("ur5_0", [10.0] * 6)  # outside the joint limits: rejected
-        world.spin(1.0)
+        rejected = world.spin(PHASE_DEADLINE, lambda: "rejected goal" in proc.output())
         alive = proc.proc.poll() is None
         code = proc.stop(20.0)
     finally:
         proc.stop(5.0)
         world.close()  # before the next module fixture starts a runtime of its own
     assert alive, proc.output()[-3000:]
-    assert len(log.starts) == len(PHASES), log.starts  # the World went through every phase
+    assert finished and len(log.starts) == len(PHASES), log.starts  # every phase came
+    assert rejected, proc.output()[-3000:]
     return world, log, proc.output(), code if code is not None else -9
 
 
@@ -293,10 +312,10 @@ def test_bad_or_silent_peer_is_never_planned_against(peer_run: tuple, phase: str
     from the planner's first report of the fault to its last tick before the peer's next
     phase began: no state of that phase can have reached it by then."""
     world, log, _, _ = peer_run
-    k = [n for n, _ in PHASES].index(phase)
+    k = PHASES.index(phase)
     statuses = world.statuses["ur5_0"]
     first = _first_report(statuses, log, k)
-    assert first is not None, [s.message for s in statuses]
+    assert first is not None, (log.timed_out, [s.message for s in statuses])
     window = [s for s in statuses[first:] if s.observation_ns < log.starts[k + 1]]
     planned = [s for s in window if s.message in PLANNED]
     if phase == "silent":  # planned from a state sent before the silence that came in late
@@ -315,7 +334,7 @@ def test_bad_or_silent_peer_is_never_planned_against(peer_run: tuple, phase: str
 def test_rejections_and_jumps_are_counted(peer_run: tuple) -> None:
     world, log, _, _ = peer_run
     last = world.statuses["ur5_0"][-1].values
-    bad = sum(n for (name, _), n in zip(PHASES, log.sent, strict=True) if name in ("nan", "short"))
+    bad = sum(n for name, n in zip(PHASES, log.sent, strict=True) if name in ("nan", "short"))
     # at least one per garbage phase, and never a well-formed state (best effort: some may drop)
     assert 2 <= int(last["rejected_states"]) <= bad, (last["rejected_states"], bad)
     assert int(last["state_jumps"]) >= 2  # into the teleport and back
@@ -325,7 +344,7 @@ def test_teleport_untrusts_the_peer(peer_run: tuple) -> None:
     """A status planned after the jump into the teleport was counted (and before the jump back
     was) names the peer untrusted."""
     world, log, _, _ = peer_run
-    k = [n for n, _ in PHASES].index("teleport")
+    k = PHASES.index("teleport")
     statuses = world.statuses["ur5_0"]
     before = [
         int(s.values["state_jumps"])
@@ -350,14 +369,18 @@ def test_normal_planning_resumes_after_each_fault(peer_run: tuple) -> None:
     fault ended, before it reports the next fault."""
     world, log, _, _ = peer_run
     statuses = world.statuses["ur5_0"]
-    for k, (name, _) in enumerate(PHASES):
+    for k, name in enumerate(PHASES):
         if name != "normal" or k == 0:
             continue
         fault = _first_report(statuses, log, k - 1)
         assert fault is not None, (k, [s.message for s in statuses])
         following = _first_report(statuses, log, k + 1) if k + 1 < len(PHASES) else None
         after = [s for s in statuses[fault:following] if s.observation_ns >= log.starts[k]]
-        assert any(s.message in PLANNED for s in after), (k, [s.message for s in after])
+        assert any(s.message in PLANNED for s in after), (
+            k,
+            log.timed_out,
+            [s.message for s in after],
+        )
 
 
 def test_faults_are_logged_once_per_cause_and_interval(peer_run: tuple) -> None:
@@ -372,6 +395,7 @@ def test_faults_are_logged_once_per_cause_and_interval(peer_run: tuple) -> None:
 
 # ---------------------------------------------------------------------------- solver faults
 SOLVER_FAULTS = {"ur5_0": "raise@20", "ur5_1": "hang@20", "ur5_2": "slow:0.06@20"}
+RUN_STATUSES = 160  # statuses of every planner before the run ends (the fault starts ~20th)
 
 
 @pytest.fixture(scope="module")
@@ -390,7 +414,11 @@ def solver_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[World, dict, d
             STARTUP_S, lambda: all(len(world.statuses[a]) >= 60 for a in SOLVER_FAULTS)
         )
         assert started, {a: p.output()[-2000:] for a, p in procs.items()}
-        world.spin(4.0)
+        # counted in statuses, not seconds: every planner goes on ~4 s at 25 Hz past the fault
+        ran = world.spin(
+            STARTUP_S, lambda: all(len(world.statuses[a]) >= RUN_STATUSES for a in SOLVER_FAULTS)
+        )
+        assert ran, {a: len(world.statuses[a]) for a in SOLVER_FAULTS}
         alive = {a: p.proc.poll() is None for a, p in procs.items()}
         codes = {a: p.stop(20.0) for a, p in procs.items()}
     finally:

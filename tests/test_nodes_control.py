@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from collections.abc import Mapping
 
 import numpy as np
@@ -420,22 +419,67 @@ def test_a_solver_that_always_raises_commands_the_fail_safe_and_counts() -> None
         c.stop()
 
 
-def test_a_slow_solver_misses_every_deadline_and_stays_on_the_fail_safe() -> None:
+class _TestClock:
+    """Stands in for the ``time`` module of the fault injection: a ``slow`` fault's sleep ends
+    once the test's clock (advanced tick by tick) has passed it, not the wall clock."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+        self.sleeps: list[float] = []
+        self._cond = threading.Condition()
+        self._asleep_until: float | None = None
+
+    def sleep(self, seconds: float) -> None:  # the worker thread
+        with self._cond:
+            self.sleeps.append(seconds)
+            end = self._asleep_until = self.now + seconds
+            self._cond.notify_all()
+            woke = self._cond.wait_for(lambda: self.now >= end - 1e-9, TIMEOUT)
+            self._asleep_until = None
+            self._cond.notify_all()
+        if not woke:
+            raise TimeoutError("the test clock never reached the end of the slow-down")
+
+    def advance(self, now: float) -> bool:
+        """Set the clock; True if that ends the sleep in progress."""
+        with self._cond:
+            self.now = now
+            self._cond.notify_all()
+            return self._asleep_until is not None and now >= self._asleep_until - 1e-9
+
+    def wait_asleep(self) -> None:
+        """Wait until a solve sleeps in the slow-down."""
+        with self._cond:
+            assert self._cond.wait_for(lambda: self._asleep_until is not None, TIMEOUT)
+
+
+def test_a_slow_solver_misses_every_deadline_and_stays_on_the_fail_safe(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from nehmo_ros import fault_injection
     from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
 
+    clock = _TestClock()
+    monkeypatch.setattr(fault_injection, "time", clock)
     spec = parse_fault("slow:0.06")
     assert spec is not None
     c = _controller(FaultInjectingPlanner(RecordingPlanner(), spec))  # type: ignore[arg-type]
     try:
         decisions = []
-        for k in range(10):  # real time: the solve (60 ms) outlasts the 40 ms tick
+        for k in range(10):  # on the test's clock: each solve (60 ms) outlasts a 40 ms tick
+            if clock.advance(k * 0.04):  # a solve started 2 ticks ago ends before this tick
+                _wait_idle(c)
             _feed(c, k * 0.04, 0.0)
             decisions.append(c.tick(k * 0.04))
-            time.sleep(0.04)
-        assert c.counters.deadline_misses >= 4
+            clock.wait_asleep()  # the solve of this tick (or of the last) is in its slow-down
+        assert clock.sleeps == [0.06] * 5  # every other tick a new solve: ticks 0, 2, 4, 6, 8
+        assert decisions[0].status == "starting"
+        assert c.counters.deadline_misses == 9  # no solve ever finished within its tick
         for d in decisions[1:]:
-            assert d.fail_safe and np.all(np.abs(d.velocity) <= 0.5)
+            assert d.status == "deadline_missed" and d.fail_safe and not d.hold
+            np.testing.assert_array_equal(d.velocity, FAIL_SAFE)
     finally:
+        clock.advance(math.inf)  # a solve still in its slow-down ends, so the worker can stop
         c.stop()
 
 

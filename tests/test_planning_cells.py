@@ -303,11 +303,36 @@ def test_tracker_follows_a_retimed_trajectory_within_the_speed_bound() -> None:
     np.testing.assert_allclose(q, bend * 0.5, atol=1e-9)
 
 
-def test_chomp_plans_all_arms_and_checks_the_result_exactly() -> None:
+def _colliding_segments(cell: Cell, waypoints: Mapping[str, np.ndarray]) -> list[int]:
+    """The segments of a joint path on which the episodes' own collision check (the cell
+    simulator, every arm pair and self-collisions at 10 instants per segment, more than CHOMP's
+    4) finds a collision; independent of CHOMP's own flag."""
+    hits = []
+    with CellSimulator(cell, substeps=10) as sim:
+        sim.reset({a: w[0] for a, w in waypoints.items()})
+        for k in range(len(waypoints[cell.arm_ids[0]]) - 1):
+            # one second per segment: far below every joint's velocity limit
+            if sim.step({a: w[k + 1] - w[k] for a, w in waypoints.items()}, 1.0).collided:
+                hits.append(k)
+        end = sim.positions()
+    for a, w in waypoints.items():  # the simulator followed the path (no joint limit clamped it)
+        np.testing.assert_allclose(end[a], w[-1], atol=1e-9)
+    return hits
+
+
+# seed 5: the straight path is free already; seed 6: it collides, so CHOMP must bend it
+@pytest.mark.parametrize("seed", [5, 6])
+def test_chomp_plans_all_arms_and_checks_the_result_exactly(seed: int) -> None:
     cell = load_cell("dual_ur5")
-    scenario = sample_scenario(cell, np.random.default_rng(5))
+    scenario = sample_scenario(cell, np.random.default_rng(seed))
+    s = np.linspace(0.0, 1.0, 101)[:, None]
+    straight = {
+        a: scenario.start[a] + s * (scenario.goal[a] - scenario.start[a]) for a in cell.arm_ids
+    }
+    assert bool(_colliding_segments(cell, straight)) == (seed == 6)
     result = plan_chomp(cell, scenario.start, scenario.goal)
     assert result.collision_free
+    assert _colliding_segments(cell, result.waypoints) == []  # not only CHOMP's word for it
     for arm in cell.arm_ids:
         w = result.waypoints[arm]
         assert w.shape == (101, 6)

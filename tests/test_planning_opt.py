@@ -540,12 +540,15 @@ def test_sqp_screen_setting_is_validated() -> None:
 def test_default_ipopt_settings_agree_with_sqp_within_their_tolerance(model) -> None:
     planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     paper = IpoptSolver()  # tol 1e-3, max_iter 30, limited-memory Hessian
+    compared = 0
     for q1, q2, goal in _near_contact(model, 5, 10):
         problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
         fast = solve_sqp(problem, np.zeros(6))
         ref = paper.solve(problem, np.zeros(6))
         if fast.status == "optimal" and ref.status == "optimal":
+            compared += 1
             assert abs(problem.cost(fast.y) - problem.cost(ref.y)) <= 1e-2 * problem.cost(ref.y)
+    assert compared >= 8  # both optimal on all 10 now: the check compares, not skips
 
 
 class _Failing:

@@ -31,11 +31,17 @@ def test_instances_share_one_world_per_robot_and_the_last_close_ends_it(
     a, b = SelfClearance(load_robot("ur5")), SelfClearance(load_robot("ur5"))
     client = a._world.client
     assert b._world is a._world
+    q = np.array([0.0, -1.0, 2.0, 0.0, 0.5, 0.0])  # wrist 1 about 5 cm from the end effector
+    before = a.rows(q)  # b has not asked yet: its answer below is a fresh query of the world
+    assert before.pairs == (("wrist_1_link", "ee_link"),)
     a.close()
     a.close()  # twice is harmless
     assert pb.isConnected(physicsClientId=client)
-    q = np.array([0.0, -1.0, 2.0, 0.0, 0.5, 0.0])
-    assert b.rows(q).count >= 0  # still usable
+    after = b.rows(q)  # still usable: the same rows from the world a no longer uses
+    assert after.pairs == before.pairs
+    np.testing.assert_allclose(after.distances, before.distances, atol=1e-9)
+    assert 0.0 < after.distances[0] < b.influence
+    np.testing.assert_allclose(after.A, before.A, atol=1e-9)
     b.close()
     assert not pb.isConnected(physicsClientId=client)
 
