@@ -12,18 +12,21 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import sys
 import time
-import traceback
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from nehmo_core.errors import one_line
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
-from nehmo_core.eval.metrics import EpisodeResult, RowMetrics, aggregate, evaluate_or_error
+from nehmo_core.eval.metrics import (
+    EpisodeResult,
+    RowMetrics,
+    aggregate,
+    evaluate_or_error,
+    failed_episode,
+)
 from nehmo_core.eval.planners import build_planners, unmodelled_peers
 from nehmo_core.eval.setups import OPT_KINDS, get_setup, is_centralized, parse_row, row_slug
 from nehmo_core.logs import remove_bag
@@ -116,14 +119,9 @@ def _run_job(config: BatchConfig, job: _Job) -> tuple[int, EpisodeResult, float,
     try:
         return _episode(config, job, start)
     except Exception as exc:
-        reason = f"{type(exc).__name__}: {one_line(exc)}"
-        print(
-            f"episode {job.index} of row {job.row!r} failed: {reason}\n{traceback.format_exc()}",
-            file=sys.stderr,
-            flush=True,
-        )
+        failed = failed_episode(f"episode {job.index} of row {job.row!r}", exc)
         used: dict[str, Any] = {"value_models": {}, "unmodelled_peers": {}, "epsilon": {}}
-        return job.position, EpisodeResult.failed(reason), time.perf_counter() - start, used
+        return job.position, failed, time.perf_counter() - start, used
 
 
 def _episode(

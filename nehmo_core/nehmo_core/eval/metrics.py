@@ -44,6 +44,7 @@ __all__ = [
     "aggregate",
     "evaluate_log",
     "evaluate_or_error",
+    "failed_episode",
     "format_metrics",
     "goal_distance",
     "path_lengths",
@@ -250,6 +251,17 @@ def evaluate_or_error(
         return evaluate_log(path_or_log)
     except (NehmoError, OSError) as exc:
         return EpisodeResult.failed(one_line(exc), kinds)
+
+
+def failed_episode(what: str, exc: BaseException) -> EpisodeResult:
+    """The ``error`` result of an episode that raised ``exc`` (called in the ``except`` block):
+    the traceback goes to stderr under ``what`` (which episode), the reason into the result."""
+    import sys
+    import traceback
+
+    reason = f"{type(exc).__name__}: {one_line(exc)}"
+    print(f"{what} failed: {reason}\n{traceback.format_exc()}", file=sys.stderr, flush=True)
+    return EpisodeResult.failed(reason)
 
 
 @dataclass(frozen=True)

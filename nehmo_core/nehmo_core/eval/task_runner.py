@@ -17,20 +17,22 @@ from __future__ import annotations
 
 import multiprocessing
 import platform
-import sys
 import time
-import traceback
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from nehmo_core.errors import one_line
 from nehmo_core.eval.batch import init_worker
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.ha_tasks import HaTask, check_joint_convention, pair_distances
-from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_or_error
+from nehmo_core.eval.metrics import (
+    EpisodeResult,
+    aggregate,
+    evaluate_or_error,
+    failed_episode,
+)
 from nehmo_core.eval.planners import build_planners, unmodelled_peers
 from nehmo_core.eval.report import error_notes, json_safe
 from nehmo_core.eval.setups import OPT_KINDS, parse_row, row_slug
@@ -91,13 +93,8 @@ def _run(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult, dic
     try:
         return _episode(config, row, task)
     except Exception as exc:
-        reason = f"{type(exc).__name__}: {one_line(exc)}"
-        print(
-            f"task {task.task_id} of row {row!r} failed: {reason}\n{traceback.format_exc()}",
-            file=sys.stderr,
-            flush=True,
-        )
-        return EpisodeResult.failed(reason), {"value_models": {}, "unmodelled_peers": {}}
+        failed = failed_episode(f"task {task.task_id} of row {row!r}", exc)
+        return failed, {"value_models": {}, "unmodelled_peers": {}}
 
 
 def _episode(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult, dict[str, Any]]:
