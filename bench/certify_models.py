@@ -26,7 +26,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.verify.report import certificate_stem, certificates_table
 
 ROOT = Path(__file__).resolve().parents[1]

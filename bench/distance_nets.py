@@ -57,7 +57,7 @@ def _throughput(model: torch.nn.Module, dof: int, batch: int, repeats: int) -> d
 def _compiled_throughput(model: torch.nn.Module, repeats: int = 2000) -> dict[str, object]:
     """Batch-1 value and gradient through the generated-C export used by the planner."""
     from nehmo_core.geometry.distance_casadi import distance_function
-    from nehmo_core.planning.codegen import compile_function
+    from nehmo_core.planning.numerics.codegen import compile_function
 
     compiled = compile_function(distance_function(model), "auto")  # type: ignore[arg-type]
     fn = compiled.function

@@ -41,7 +41,7 @@ from nehmo_core.eval.render import render_episode
 from nehmo_core.eval.report import markdown_table, setup_summary, write_summary
 from nehmo_core.eval.scenario_sets import scenario_set_for
 from nehmo_core.eval.setups import OPT_KINDS, get_setup, parse_row
-from nehmo_core.planning.models import parse_value_models, snapshot_value_models
+from nehmo_core.planning.models.registry import parse_value_models, snapshot_value_models
 from nehmo_core.robots.loader import cache_dir
 
 RESULTS = Path(__file__).resolve().parent / "results"

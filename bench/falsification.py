@@ -24,7 +24,7 @@ import numpy as np
 
 from nehmo_core.hjr import load_value_function
 from nehmo_core.hjr.systems import ArmPairSystem
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.verify.bound import violation_bound
 from nehmo_core.verify.certify import VerifySettings, worst_margins
 from nehmo_core.verify.distributions import (

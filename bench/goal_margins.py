@@ -9,9 +9,9 @@ the zero step. Such an episode can end with every arm at its goal only within th
 tolerance, short of the exact goals, or by breaking the margin; most end stuck. The count is
 given for the default ``t_plan`` and shorter planning horizons (peers at full speed, the paper's
 game), and for peers that announce the hold bound ``k`` (every arm settled: ``τ = k·t_safe``,
-:mod:`nehmo_core.planning.speed_bounds`; ``k = 0``: the goals' learned distance itself against
-ε). Seed 0 uses the committed tables (``bench/results/``), other seeds the fresh tables under
-``bench/results/fresh/seed<S>/``; the outcomes of their ``nehmo`` rows are cross-tabulated.
+:mod:`nehmo_core.planning.stages.speed_bounds`; ``k = 0``: the goals' learned distance itself
+against ε). Seed 0 uses the committed tables (``bench/results/``), other seeds the fresh tables
+under ``bench/results/fresh/seed<S>/``; the outcomes of their ``nehmo`` rows are cross-tabulated.
 """
 
 from __future__ import annotations
@@ -27,9 +27,9 @@ from _report import machine_at_end, write_report
 
 from nehmo_core.eval.setups import get_setup
 from nehmo_core.planning.factory import make_planner
-from nehmo_core.planning.models import ModelRegistry
+from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.sim.scenario_files import load_scenario_set
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -61,13 +61,13 @@ from _report import cpu_model
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr import load_value_function
 from nehmo_core.hjr.casadi_export import value_functions
-from nehmo_core.planning.chomp import plan_chomp
-from nehmo_core.planning.codegen import compile_function
-from nehmo_core.planning.models import ModelRegistry
+from nehmo_core.planning.baselines.chomp import plan_chomp
+from nehmo_core.planning.models.registry import ModelRegistry
+from nehmo_core.planning.models.synthetic import planning_distance_model, random_value_function
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.synthetic import planning_distance_model, random_value_function
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.numerics.codegen import compile_function
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import Scenario, sample_scenario

@@ -37,14 +37,14 @@ import torch
 from planning_speed import CASES, _scenarios, far_models
 
 from nehmo_core.hjr import load_value_function
-from nehmo_core.planning.ipopt_solver import IpoptSolver
-from nehmo_core.planning.models import ModelRegistry
+from nehmo_core.planning.models.registry import ModelRegistry
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt import OptProblem
-from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.solvers import make_solver
-from nehmo_core.planning.sqp import SolveResult, solve_sqp
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.opt.problem import OptProblem
+from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.solvers.base import make_solver
+from nehmo_core.planning.solvers.ipopt import IpoptSolver
+from nehmo_core.planning.solvers.sqp import SolveResult, solve_sqp
 from nehmo_core.robots import load_cell
 
 RESULTS = Path(__file__).resolve().parent / "results"

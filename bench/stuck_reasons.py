@@ -26,7 +26,7 @@ from pathlib import Path
 from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.eval.metrics import goal_distance
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SETUPS = {

@@ -35,11 +35,11 @@ from nehmo_core.hjr.systems import (
     system_names,
 )
 from nehmo_core.hjr.systems.arm_pairs import SwappedBoundary, make_arm_pair_system
-from nehmo_core.planning import models as planning_models
-from nehmo_core.planning.models import ModelRegistry, pair_geometry
+from nehmo_core.planning.models import registry as planning_models
+from nehmo_core.planning.models.pair_frame import match_pair
+from nehmo_core.planning.models.registry import ModelRegistry, pair_geometry
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.pair_frame import match_pair
-from nehmo_core.planning.value_model import PairValueModel
 from nehmo_core.robots.loader import load_cell, load_robot
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
 from nehmo_core.verify.truth import exact_margin, pair_arms

@@ -20,7 +20,7 @@ from nehmo_core.eval.ha_tasks import (
     pair_distances,
 )
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning import exact_guard, self_clearance
+from nehmo_core.planning.stages import exact_guard, self_clearance
 
 TASKS = Path(__file__).parent / "data" / "ha_tasks"
 

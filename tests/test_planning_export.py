@@ -20,10 +20,10 @@ from nehmo_core.hjr.model_files import load_value_function
 from nehmo_core.hjr.networks import NetworkSettings, ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import ArmPairSystem, JointInterval
 from nehmo_core.hjr.systems.arm_pairs import SwappedBoundary
-from nehmo_core.planning import codegen
-from nehmo_core.planning.codegen import compile_function
-from nehmo_core.planning.synthetic import proxy_distance_model, random_value_function
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.models.synthetic import proxy_distance_model, random_value_function
+from nehmo_core.planning.models.value_model import PairValueModel
+from nehmo_core.planning.numerics import codegen
+from nehmo_core.planning.numerics.codegen import compile_function
 from nehmo_core.robots.model import Pose
 
 SMALL = NetworkSettings(width=32, hidden_layers=2)

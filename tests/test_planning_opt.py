@@ -14,18 +14,18 @@ import pytest
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.hjr.networks import NetworkSettings
-from nehmo_core.planning import native, sqp
-from nehmo_core.planning.baselines import NaivePlanner, TrajectoryTracker, retime
-from nehmo_core.planning.ipopt_solver import IpoptSolver
+from nehmo_core.planning.baselines.naive import NaivePlanner, TrajectoryTracker, retime
+from nehmo_core.planning.models.synthetic import random_value_function
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
-from nehmo_core.planning.qp import qp_step
-from nehmo_core.planning.self_clearance import SelfClearanceRows
-from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.solvers import SqpSolver, make_solver
-from nehmo_core.planning.sqp import SolveResult, solve_sqp
-from nehmo_core.planning.synthetic import random_value_function
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.numerics.qp import qp_step
+from nehmo_core.planning.opt.problem import Constraints, OptProblem, worst_case_disturbance
+from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.solvers import native, sqp
+from nehmo_core.planning.solvers.base import SqpSolver, make_solver
+from nehmo_core.planning.solvers.ipopt import IpoptSolver
+from nehmo_core.planning.solvers.sqp import SolveResult, solve_sqp
+from nehmo_core.planning.stages.self_clearance import SelfClearanceRows
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenarios import sample_configuration
 

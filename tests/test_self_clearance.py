@@ -8,9 +8,9 @@ import pytest
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning import self_clearance
-from nehmo_core.planning.self_clearance import SelfClearance, project_step
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.stages import self_clearance
+from nehmo_core.planning.stages.self_clearance import SelfClearance, project_step
 from nehmo_core.robots.loader import load_robot
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
 

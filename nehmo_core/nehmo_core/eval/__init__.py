@@ -8,7 +8,7 @@ paper's, renders.
   collision checks at sub-steps, a bag per episode (:mod:`.episode_log`, :mod:`.telemetry`).
 - :mod:`.metrics`: :func:`evaluate_log` (an episode's result from its log) and :func:`aggregate`.
 - :mod:`.planners`: the planners of a row (value models from
-  :mod:`nehmo_core.planning.models`); :mod:`.batch`: process pool.
+  :mod:`nehmo_core.planning.models.registry`); :mod:`.batch`: process pool.
 - :mod:`.report`, :mod:`.paper`: JSON and markdown summaries with the paper's numbers.
 - :mod:`.render`: a GIF and a distance plot of an episode, from its log.
 """

@@ -28,8 +28,8 @@ from nehmo_core.eval.metrics import format_metrics
 from nehmo_core.eval.report import markdown_table, setup_summary, write_summary
 from nehmo_core.eval.scenario_sets import scenario_set_for
 from nehmo_core.eval.setups import SETUPS, get_setup, parse_row, row_slug
-from nehmo_core.planning.models import parse_value_models, snapshot_value_models
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.models.registry import parse_value_models, snapshot_value_models
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.sim.scenario_files import load_scenario_set
 from nehmo_core.sim.scenarios import ScenarioSet
 

@@ -7,9 +7,9 @@ at tick k − 1** (during tick 0 no command exists yet and the arms hold still).
 :class:`~nehmo_core.sim.cell_sim.CellSimulator` integrates the velocities and checks every arm
 pair and every arm's self-collision exactly at ``substeps`` instants (4 at 25 Hz: every 10 ms,
 the authors' spacing). Speed bounds announced by NeHMO planners with their commands (see
-:mod:`~nehmo_core.planning.speed_bounds`) are heard by the others at the next tick and checked
-against the observed motion. The episode stops at the first collision, when every arm is within the
-tolerance of its goal (checked at tick boundaries), or at the time limit.
+:mod:`~nehmo_core.planning.stages.speed_bounds`) are heard by the others at the next tick and
+checked against the observed motion. The episode stops at the first collision, when every arm is
+within the tolerance of its goal (checked at tick boundaries), or at the time limit.
 """
 
 from __future__ import annotations
@@ -28,9 +28,9 @@ from nehmo_core.eval.metrics import EpisodeResult, goal_distance, path_lengths
 from nehmo_core.eval.setups import SUCCESS_NORMS, Setup
 from nehmo_core.eval.telemetry import status_message
 from nehmo_core.geometry.pybullet_world import Collision
-from nehmo_core.planning.interface import Planner
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.speed_bounds import PeerBounds
+from nehmo_core.planning.opt.interface import Planner
+from nehmo_core.planning.stages.speed_bounds import PeerBounds
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenarios import Scenario

@@ -33,7 +33,7 @@ from nehmo_core.errors import NehmoError, one_line
 from nehmo_core.eval.episode_log import EpisodeLog, EpisodeLogError, read_episode_log
 from nehmo_core.eval.setups import OPT_KINDS, is_centralized
 from nehmo_core.geometry.pybullet_world import Collision
-from nehmo_core.planning.interface import Telemetry
+from nehmo_core.planning.opt.interface import Telemetry
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import goal_error
 

@@ -1,6 +1,6 @@
 """The planners of an evaluation row: one per arm, Opt kinds backed by the model registry.
 
-Value models come from :class:`~nehmo_core.planning.models.ModelRegistry`. A row fails to
+Value models come from :class:`~nehmo_core.planning.models.registry.ModelRegistry`. A row fails to
 build, naming the missing pair, when an Opt planner has a peer in reach that no model covers:
 such a peer would not be constrained at all.
 """
@@ -13,11 +13,11 @@ from nehmo_core.errors import NehmoError
 from nehmo_core.eval.setups import is_centralized
 from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS
 from nehmo_core.planning.factory import centralized_trackers, make_planner
-from nehmo_core.planning.interface import Planner
-from nehmo_core.planning.models import OPT_KINDS, SHIPPED_PAIRS, ModelRegistry
+from nehmo_core.planning.models.registry import OPT_KINDS, SHIPPED_PAIRS, ModelRegistry
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.opt.interface import Planner
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import Scenario
 

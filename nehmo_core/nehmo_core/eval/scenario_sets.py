@@ -16,7 +16,7 @@ from pathlib import Path
 from nehmo_core.errors import UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.setups import SCENARIO_FILTERS, Setup
-from nehmo_core.planning.baselines import NaivePlanner
+from nehmo_core.planning.baselines.naive import NaivePlanner
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.planning.factory import CENTRALIZED, DECENTRALIZED
-from nehmo_core.planning.models import OPT_KINDS
+from nehmo_core.planning.models.registry import OPT_KINDS
 from nehmo_core.robots import Cell, load_cell
 
 __all__ = [

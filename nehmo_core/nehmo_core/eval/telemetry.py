@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from nehmo_core.errors import NehmoError
 from nehmo_core.geometry.pybullet_world import Collision
 from nehmo_core.logs.messages import DiagnosticArray, DiagnosticStatus, Header, KeyValue, Time
-from nehmo_core.planning.interface import Telemetry
+from nehmo_core.planning.opt.interface import Telemetry
 
 __all__ = [
     "StatusRecord",

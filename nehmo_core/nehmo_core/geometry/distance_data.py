@@ -138,7 +138,7 @@ def _init_worker(pair: str) -> None:
     cell, a, b = pair_cell(pair)
     _WORLD = (CellWorld(cell), a, b)
     if pair in CONDITIONED_PAIRS:
-        from nehmo_core.planning.pair_frame import base_yaw_joint
+        from nehmo_core.planning.models.pair_frame import base_yaw_joint
 
         signs = [base_yaw_joint(cell.arm(x).robot.name) for x in (a, b)]
         if signs[0] is None or signs[1] is None:

@@ -12,7 +12,7 @@ Arm 1 sits at the pair frame's origin, arm 2 at ``base2`` in that frame. A *pose
 model (``base2_range`` set) takes one more input, the base distance ``r`` [m]: arm 2 then sits
 at ``base2 + (r, 0, 0)``, so ``q = (q¹, q², r)``. Any two arms whose first joints turn them
 about vertical base axes at the same height reduce to that frame (see
-:mod:`nehmo_core.planning.pair_frame`), so one conditioned model serves every layout.
+:mod:`nehmo_core.planning.models.pair_frame`), so one conditioned model serves every layout.
 """
 
 from __future__ import annotations

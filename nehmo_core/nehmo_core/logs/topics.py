@@ -13,7 +13,7 @@ topic                                            type
 ================================================ ==================================
 
 ``planner/speed_bound`` is the speed bound the arm announces with each command, a fraction of
-its top speed (1: none; see :mod:`nehmo_core.planning.speed_bounds`).
+its top speed (1: none; see :mod:`nehmo_core.planning.stages.speed_bounds`).
 
 Run-wide: ``/clock`` (rosgraph_msgs/msg/Clock), ``/nehmo/collisions``
 (diagnostic_msgs/msg/DiagnosticArray, one status per colliding pair, published by the simulator)

@@ -2,7 +2,7 @@
 
 =================  =====================================================================
 ``nehmo``          Opt with the ``bc+sym`` value model (the paper's NeHMO), plus the
-                   self-clearance rows (:mod:`~nehmo_core.planning.self_clearance`) and
+                   self-clearance rows (:mod:`~nehmo_core.planning.stages.self_clearance`) and
                    the stall escape (:class:`~nehmo_core.planning.nehmo.NehmoPlanner`)
 ``nehmo_paper``    NeHMO exactly as the paper's Opt: no self-clearance rows, no stall escape
 ``nehmo_no_sym``   Opt with the ``bc`` value model (NeHMO w/o Sym)
@@ -27,13 +27,13 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
-from nehmo_core.planning.baselines import NaivePlanner, TrajectoryTracker, retime
-from nehmo_core.planning.chomp import ChompSettings, plan_chomp
-from nehmo_core.planning.interface import Planner
+from nehmo_core.planning.baselines.chomp import ChompSettings, plan_chomp
+from nehmo_core.planning.baselines.naive import NaivePlanner, TrajectoryTracker, retime
+from nehmo_core.planning.baselines.ompl import OmplSettings, plan_rrt_connect
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.ompl_planner import OmplSettings, plan_rrt_connect
-from nehmo_core.planning.settings import PAPER_OPT, PlannerSettings
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.opt.interface import Planner
+from nehmo_core.planning.opt.settings import PAPER_OPT, PlannerSettings
 from nehmo_core.robots.model import Cell
 
 __all__ = ["CENTRALIZED", "DECENTRALIZED", "centralized_trackers", "make_planner"]

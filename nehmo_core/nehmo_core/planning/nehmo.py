@@ -31,26 +31,26 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.planning.exact_guard import GUARD_NEAR, closer_than, guard_step, prepare
-from nehmo_core.planning.fail_safe import MaximinFailSafe, maximin_command
-from nehmo_core.planning.interface import (
+from nehmo_core.planning.models.margins import CertifiedMargins
+from nehmo_core.planning.models.pair_frame import constrained_pairs
+from nehmo_core.planning.models.value_model import PairValueModel
+from nehmo_core.planning.opt.interface import (
     PlanResult,
     Telemetry,
     check_peers,
     goal_error,
     one_joint_vector,
 )
-from nehmo_core.planning.margins import CertifiedMargins
-from nehmo_core.planning.native import loop
-from nehmo_core.planning.opt import Constraints, OptProblem, worst_case_disturbance
-from nehmo_core.planning.pair_frame import constrained_pairs
-from nehmo_core.planning.self_clearance import SelfClearance, SelfClearanceRows, project_step
-from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.silent_peers import SilentPathWatch
-from nehmo_core.planning.solvers import OptSolver, SqpSolver, make_solver
-from nehmo_core.planning.speed_bounds import FULL_SPEED, check_bound
-from nehmo_core.planning.stall_escape import StallEscape
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.opt.problem import Constraints, OptProblem, worst_case_disturbance
+from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.solvers.base import OptSolver, SqpSolver, make_solver
+from nehmo_core.planning.solvers.native import loop
+from nehmo_core.planning.stages.exact_guard import GUARD_NEAR, closer_than, guard_step, prepare
+from nehmo_core.planning.stages.fail_safe import MaximinFailSafe, maximin_command
+from nehmo_core.planning.stages.self_clearance import SelfClearance, SelfClearanceRows, project_step
+from nehmo_core.planning.stages.silent_peers import SilentPathWatch
+from nehmo_core.planning.stages.speed_bounds import FULL_SPEED, check_bound
+from nehmo_core.planning.stages.stall_escape import StallEscape
 from nehmo_core.robots.model import Cell
 
 __all__ = ["NehmoPlanner"]
@@ -132,7 +132,7 @@ class NehmoPlanner(StallEscape):
 
     def group_margin(self, model_index: int, bound: float) -> float:
         """The margin [m] of model ``model_index``'s rows against peers planned at ``bound`` of
-        full speed (:meth:`~nehmo_core.planning.margins.CertifiedMargins.group`)."""
+        full speed (:meth:`~nehmo_core.planning.models.margins.CertifiedMargins.group`)."""
         return self.margins.group(model_index, bound)
 
     def _self_rows(self, q: np.ndarray) -> SelfClearanceRows | None:
@@ -158,7 +158,7 @@ class NehmoPlanner(StallEscape):
         seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape_seed
         self._rng = np.random.default_rng(seed)
         self._clear_stall()
-        self.guarded = 0  # commands the exact guard shortened (planning/exact_guard.py)
+        self.guarded = 0  # commands the exact guard shortened (planning/stages/exact_guard.py)
         s = self.settings
         robots = {p: self.cell.arm(p).robot for p in self.pairs}
         self._watch = SilentPathWatch(
@@ -358,8 +358,8 @@ class NehmoPlanner(StallEscape):
         """One tick: the command for ``q_self`` among ``peers`` toward ``q_goal``.
 
         ``peer_bounds``: the speed bound (a fraction of d̄) each peer has announced and still
-        keeps (:class:`~nehmo_core.planning.speed_bounds.PeerBounds`); the peers in it take part
-        in the announcements (they plan against this arm's), missing peers are planned at 1 and
+        keeps (:class:`~nehmo_core.planning.stages.speed_bounds.PeerBounds`); the peers in it take
+        part in the announcements (they plan against this arm's), missing peers are planned at 1 and
         treated as silent. The command's own announcement is ``telemetry.speed_bound``.
         """
         start = time.perf_counter()

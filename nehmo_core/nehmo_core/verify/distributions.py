@@ -3,7 +3,7 @@
 ``uniform``: i.i.d. uniform over the system's state box (for arm pairs every joint in
 ``(−π, π]``). ``visited``: i.i.d. draws (with replacement) from the pair states of evaluation
 episodes — every logged tick, every ordered (own arm, peer) pair of the episode's cell that maps
-onto the model's pair (:func:`~nehmo_core.planning.pair_frame.match_pair`, the planner's own
+onto the model's pair (:func:`~nehmo_core.planning.models.pair_frame.match_pair`, the planner's own
 mapping) — so the certificate speaks of the states the closed-loop planner actually meets.
 Either can be restricted to a level set ``V(τ, x) ≥ δ`` by rejection (:func:`draw_level_set`).
 """
@@ -20,7 +20,7 @@ import numpy as np
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
-from nehmo_core.planning.pair_frame import (
+from nehmo_core.planning.models.pair_frame import (
     ModelGeometry,
     match_pair,
     pose_from_matrix,
@@ -82,7 +82,7 @@ class VisitedStates:
 
 def pair_model_geometry(system: ArmPairSystem) -> ModelGeometry:
     """``(robot 1, robot 2, base of arm 2 seen from arm 1[, base-distance range])`` of a shipped
-    arm-pair system, as :func:`~nehmo_core.planning.pair_frame.match_pair` takes it."""
+    arm-pair system, as :func:`~nehmo_core.planning.models.pair_frame.match_pair` takes it."""
     cell, a, b = pair_arms(system.name)
     arm1, arm2 = cell.arm(a), cell.arm(b)
     pose = pose_from_matrix(relative_pose(arm1.base, arm2.base))

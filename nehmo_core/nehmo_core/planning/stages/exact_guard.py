@@ -22,7 +22,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
 __all__ = ["GUARD_NEAR", "closer_than", "guard_step", "prepare"]

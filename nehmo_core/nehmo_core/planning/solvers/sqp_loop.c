@@ -1,11 +1,11 @@
-/* The SQP of nehmo_core.planning.sqp in C: the iterations of _iterate (nehmo_sqp_iterate) and
+/* The SQP of nehmo_core.planning.solvers.sqp in C: the iterations of _iterate (nehmo_sqp_iterate) and
  * the rest of solve_sqp after its naive-step check, screening rounds and restarts included
  * (nehmo_sqp_solve).
  *
  * Same algorithm, step for step: linearize, solve the QP with DAQP (through the C entry point
  * of the installed daqp module), backtrack on the l1 merit function, damped BFGS. The value
  * networks are the CasADi-generated V/grad V functions of the pair models, called directly.
- * Compiled and loaded by nehmo_core.planning.native; its docstring says why.
+ * Compiled and loaded by nehmo_core.planning.solvers.native; its docstring says why.
  */
 #include <math.h>
 #include <stdlib.h>

@@ -19,8 +19,8 @@ import numpy as np
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.hjr.casadi_export import pair_boundary, value_functions
 from nehmo_core.hjr.networks import ValueFunction
-from nehmo_core.planning.codegen import compile_function
-from nehmo_core.planning.pair_frame import inverse_pose
+from nehmo_core.planning.models.pair_frame import inverse_pose
+from nehmo_core.planning.numerics.codegen import compile_function
 from nehmo_core.robots.model import Pose
 
 __all__ = ["PairValueModel"]
@@ -33,7 +33,7 @@ class PairValueModel:
     ``tau`` is time-to-go [s] in ``[0, horizon]``; ``x = (q¹, q²)`` [rad] in the pair frame.
     A pose-conditioned model (``base_range`` set) serves every base distance ``r`` [m] in that
     range, robot 2 then sitting at ``base2`` moved by ``(r, 0, 0)``; its states are
-    ``x = (q¹, q², r)`` (:func:`~nehmo_core.planning.pair_frame.match_pair` appends ``r``).
+    ``x = (q¹, q², r)`` (:func:`~nehmo_core.planning.models.pair_frame.match_pair` appends ``r``).
     """
 
     name: str
@@ -57,7 +57,7 @@ class PairValueModel:
 
     @property
     def geometry(self) -> tuple[str, str, Pose, tuple[float, float] | None]:
-        """What :func:`~nehmo_core.planning.pair_frame.match_pair` takes for this model."""
+        """What :func:`~nehmo_core.planning.models.pair_frame.match_pair` takes for this model."""
         return self.robot1, self.robot2, self.base2, self.base_range
 
     @classmethod
@@ -70,7 +70,7 @@ class PairValueModel:
     ) -> PairValueModel:
         """Export ``value_function`` (an arm-pair system with a learned-distance boundary).
         ``single``: the generated C's weight products in float (faster, ``V`` within ~1e-8;
-        :mod:`~nehmo_core.planning.codegen`); ``False`` keeps them in double.
+        :mod:`~nehmo_core.planning.numerics.codegen`); ``False`` keeps them in double.
 
         The pair geometry comes from the distance: as trained for a plain distance; with the
         robots exchanged and the inverse base offset for a swapped one (``kinova_ur5``). A

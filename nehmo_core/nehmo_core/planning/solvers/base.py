@@ -7,10 +7,10 @@ from typing import Protocol
 
 import numpy as np
 
-from nehmo_core.planning.ipopt_solver import IpoptSolver
-from nehmo_core.planning.opt import OptProblem
-from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.sqp import SolveResult, solve_sqp
+from nehmo_core.planning.opt.problem import OptProblem
+from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.solvers.ipopt import IpoptSolver
+from nehmo_core.planning.solvers.sqp import SolveResult, solve_sqp
 
 __all__ = ["OptSolver", "SqpSolver", "make_solver"]
 

@@ -36,7 +36,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.planning.qp import qp_step
+from nehmo_core.planning.numerics.qp import qp_step
 
 __all__ = ["MaximinFailSafe", "maximin_command", "worst_case_rates"]
 

@@ -16,7 +16,7 @@ from typing import Protocol
 
 import numpy as np
 
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots.model import RobotModel
 
 __all__ = ["StallEscape"]

@@ -23,10 +23,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from nehmo_core.planning.native import loop
-from nehmo_core.planning.opt import OptProblem
-from nehmo_core.planning.qp import QPStep, qp_step
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.numerics.qp import QPStep, qp_step
+from nehmo_core.planning.opt.problem import OptProblem
+from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.solvers.native import loop
 
 __all__ = ["QPStep", "SolveResult", "qp_step", "solve_sqp"]
 

@@ -6,11 +6,11 @@ In step variables ``y = t_plan·u`` [rad] (the own arm's displacement over the s
                             |y_j| ≤ t_plan·ū,
 
 plus, when enabled, the arm's self-clearance rows ``A·y ≥ b`` (linear, see
-:mod:`nehmo_core.planning.self_clearance`); ``e₀ = q¹ − q_goal`` (continuous joints optionally
-wrapped) and ``x_i`` is the pair state in model ``i``'s frame with the peer already moved by its
-worst case ``dⁱ = −d̄·sign(∂V/∂qⁱ)`` evaluated at ``τ = t_plan`` from the current state.
+:mod:`nehmo_core.planning.stages.self_clearance`); ``e₀ = q¹ − q_goal`` (continuous joints
+optionally wrapped) and ``x_i`` is the pair state in model ``i``'s frame with the peer already
+moved by its worst case ``dⁱ = −d̄·sign(∂V/∂qⁱ)`` evaluated at ``τ = t_plan`` from the current state.
 ``τ_i = t_safe`` unless the peer keeps an announced speed bound (see
-:mod:`nehmo_core.planning.speed_bounds`); each group of rows carries its own ``τ``.
+:mod:`nehmo_core.planning.stages.speed_bounds`); each group of rows carries its own ``τ``.
 Solvers return ``u = y / t_plan``.
 """
 
@@ -23,8 +23,8 @@ from typing import cast
 
 import numpy as np
 
-from nehmo_core.planning.self_clearance import SelfClearanceRows
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.models.value_model import PairValueModel
+from nehmo_core.planning.stages.self_clearance import SelfClearanceRows
 
 __all__ = ["Constraints", "OptProblem", "worst_case_disturbance"]
 

@@ -22,8 +22,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.planning.interface import PlanResult, Telemetry, goal_error, one_joint_vector
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.interface import PlanResult, Telemetry, goal_error, one_joint_vector
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
 __all__ = ["NaivePlanner", "TimedTrajectory", "TrajectoryTracker", "retime"]

@@ -6,7 +6,7 @@ models certify (``nehmo verify``) at ``t_safe``. Rows against a peer that announ
 planned at time-to-go ``bound·t_safe``, keep ``max(settled floor, δ)`` of their own model's
 certificate at that horizon (the settled floor is ``settled_epsilon``; with no certificate at
 exactly that horizon, the next longer certified one; see
-:meth:`~nehmo_core.planning.value_model.PairValueModel.certified_margin`), never more than ε.
+:meth:`~nehmo_core.planning.models.value_model.PairValueModel.certified_margin`), never more than ε.
 Full-speed rows keep one ε for every model: with each model's own ``δ`` instead (0.05 m for the
 five-UR5 cell's 0.849 m and 1.2 m pairs against 0.083 m for its 0.6 m pairs, then on 10M-sample
 models), the centre arm was squeezed into contact in a closed loop where one ε kept it clear
@@ -18,8 +18,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.models.value_model import PairValueModel
+from nehmo_core.planning.opt.settings import PlannerSettings
 
 
 class CertifiedMargins:

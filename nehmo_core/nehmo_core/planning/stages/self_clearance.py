@@ -25,7 +25,7 @@ import pybullet as pb
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.qp import qp_step
+from nehmo_core.planning.numerics.qp import qp_step
 from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel
 
 __all__ = ["SelfClearance", "SelfClearanceRows", "project_step"]

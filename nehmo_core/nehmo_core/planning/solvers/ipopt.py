@@ -17,9 +17,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from nehmo_core.planning.opt import OptProblem
-from nehmo_core.planning.sqp import SolveResult
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.models.value_model import PairValueModel
+from nehmo_core.planning.opt.problem import OptProblem
+from nehmo_core.planning.solvers.sqp import SolveResult
 
 __all__ = ["IpoptSolver"]
 

@@ -25,7 +25,7 @@ from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
 
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.robots.model import RobotModel
 
 __all__ = ["APPROACH", "SilentPathWatch"]

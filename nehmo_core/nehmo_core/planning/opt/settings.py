@@ -12,7 +12,7 @@ __all__ = ["PAPER_OPT", "SOLVERS", "PlannerSettings"]
 
 SOLVERS = ("sqp", "ipopt")
 FAIL_SAFES = ("single", "maximin")
-"""``sqp``: the exact active-set SQP of :mod:`nehmo_core.planning.sqp` (fast);
+"""``sqp``: the exact active-set SQP of :mod:`nehmo_core.planning.solvers.sqp` (fast);
 ``ipopt``: IPOPT through CasADi, the authors' setting (the reference)."""
 
 PAPER_OPT: dict[str, Any] = {
@@ -43,10 +43,10 @@ class PlannerSettings:
     """
 
     epsilon: float = 0.05  # safety margin on V
-    # certified margins (``nehmo verify`` cards, ``planning/margins.py``): epsilon is raised to the
-    # largest δ certified at t_safe by the pair models in use; rows against a peer that announced a
-    # bound keep max(epsilon as given, their model's δ at hold_bound·t_safe), at most the raised
-    # epsilon. False keeps epsilon as given for every row (the paper's fixed margin)
+    # certified margins (``nehmo verify`` cards, ``planning/models/margins.py``): epsilon is raised
+    # to the largest δ certified at t_safe by the pair models in use; rows against a peer that
+    # announced a bound keep max(epsilon as given, their model's δ at hold_bound·t_safe), at most
+    # the raised epsilon. False keeps epsilon as given for every row (the paper's fixed margin)
     certified_epsilon: bool = True
     # with certified margins, the floor [m] of rows against a peer that announced a speed bound:
     # they keep min(raised epsilon, max(settled_epsilon, their model's δ at hold_bound·t_safe));
@@ -66,7 +66,7 @@ class PlannerSettings:
     fail_safe_deadband: float = 0.0
     # "single": the paper's ū·sign(∂V/∂q¹) of the most critical peer; "maximin": the command
     # that maximizes the smallest worst-case V rate over every peer within fail_safe_band [m] of
-    # the smallest V (planning/fail_safe.py)
+    # the smallest V (planning/stages/fail_safe.py)
     fail_safe: str = "maximin"
     fail_safe_band: float = 0.05
     # the maximin fail-safe is lexicographic: it may lower the worst pair's predicted V by up to
@@ -75,7 +75,7 @@ class PlannerSettings:
     # ... and its own motion may lower no critical pair's V faster than fail_safe_harm [m/s]
     # (0: it never trades one peer for another; 100, above any rate: no limit)
     fail_safe_harm: float = 0.0
-    # announced speed bounds (not in the paper; planning/speed_bounds.py): an arm within
+    # announced speed bounds (not in the paper; planning/stages/speed_bounds.py): an arm within
     # hold_tolerance [rad] (L2) of its goal announces hold_bound (a fraction of ū) and keeps its
     # commands within it until it leaves hold_release, gets a new goal or a peer breaks
     # V(hold_bound·t_plan) ≥ ε with it (half its settled margin for a peer that announces),
@@ -89,19 +89,19 @@ class PlannerSettings:
     bound_release_ticks: int = 2
     # commands are shortened so that the arm's real geometry (PyBullet) stays exact_guard [m]
     # from every peer that holds at its goal under an announced bound, and a holding arm flees a
-    # full-speed peer closer than that (planning/exact_guard.py; 0: both off)
+    # full-speed peer closer than that (planning/stages/exact_guard.py; 0: both off)
     exact_guard: float = 0.01
     # a peer that announces nothing is extrapolated silent_lookahead [s] along its observed joint
     # velocity (its motion over one tick [s] between plan() calls); when V(t_plan) at a point of
     # that path is below silent_clearance [m] and the peer is approaching, the step's target is
     # up ∂V/∂q_own there instead of the goal; the V rows are unchanged
-    # (planning/silent_peers.py; silent_lookahead = 0: off)
+    # (planning/stages/silent_peers.py; silent_lookahead = 0: off)
     silent_lookahead: float = 2.0
     silent_clearance: float = 0.2
     tick: float = 0.04
     # self-collision velocity dampers on the step and the fail-safe (not in the paper's Opt):
     # link pairs closer than self_influence [m] may close at most self_gain of their distance
-    # above self_safety [m] per planned step (planning/self_clearance.py)
+    # above self_safety [m] per planned step (planning/stages/self_clearance.py)
     self_clearance: bool = True
     self_influence: float = 0.10
     self_safety: float = 0.005

@@ -33,10 +33,10 @@ import daqp
 import numpy as np
 
 from nehmo_core.errors import NehmoError
-from nehmo_core.planning.codegen import _compiler, _cpu, compile_library
-from nehmo_core.planning.opt import OptProblem
-from nehmo_core.planning.qp import qp_step
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.models.value_model import PairValueModel
+from nehmo_core.planning.numerics.codegen import _compiler, _cpu, compile_library
+from nehmo_core.planning.numerics.qp import qp_step
+from nehmo_core.planning.opt.problem import OptProblem
 from nehmo_core.robots.loader import cache_dir
 
 __all__ = ["STATUSES", "NativeLoop", "loop"]

@@ -7,8 +7,8 @@ given as ``[KIND=]SOURCE``:
 * ``SOURCE`` is a shipped pair name (``ur5_ur5``, ``ur5_kinova``, ``kinova_ur5``: the variant
   is the row's, per :data:`OPT_KINDS`), a training run directory (its
   model, or its latest checkpoint) or a ``.safetensors`` file, or ``synthetic``: random-weight
-  stand-ins from :mod:`nehmo_core.planning.synthetic` (for smoke runs only; their numbers mean
-  nothing).
+  stand-ins from :mod:`nehmo_core.planning.models.synthetic` (for smoke runs only; their numbers
+  mean nothing).
 * ``KIND=`` limits a source to one planner kind (``nehmo_no_sym=runs/ur5_ur5_bc``); a source
   without it serves every Opt kind whose variant it matches.
 * Without a source for a kind, the shipped models of the cell's robot pairs are used
@@ -17,7 +17,7 @@ given as ``[KIND=]SOURCE``:
   0.6 m apart) and, where the row's variant is shipped for it, ``ur5_ur5_diag`` (0.849 m, the
   diagonal neighbours of the five-UR5 cell) and ``ur5_ur5_opposite`` (1.2 m, the outer arms
   facing each other across the centre arm in the three- and five-UR5 cells). Each peer uses the
-  model whose base distance matches (:func:`~nehmo_core.planning.pair_frame.match_pair`).
+  model whose base distance matches (:func:`~nehmo_core.planning.models.pair_frame.match_pair`).
   A UR5 pair at any other base distance within its range uses ``ur5_ur5_any``, the value
   function conditioned on the base distance (loaded only when some pair of the cell needs it).
   A UR5 and a Kinova at another base distance likewise use ``ur5_kinova_any`` (the UR5's side)
@@ -44,14 +44,14 @@ from nehmo_core.hjr.model_files import (
     SHIPPED_VALUE_FUNCTIONS,
     load_value_function,
 )
-from nehmo_core.planning.pair_frame import (
+from nehmo_core.planning.models.pair_frame import (
     ModelGeometry,
     inverse_pose,
     match_pair,
     pose_from_matrix,
     relative_pose,
 )
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.robots.model import Cell
 
 __all__ = [
@@ -275,7 +275,7 @@ class ModelRegistry:
         return [PairValueModel.from_value_function(vf, name, backend=self.backend)]
 
     def _synthetic(self, variant: str, pairs: tuple[tuple[str, str], ...]) -> list[PairValueModel]:
-        from nehmo_core.planning.synthetic import random_value_function
+        from nehmo_core.planning.models.synthetic import random_value_function
 
         slug = variant.replace("+", "_")
         made: dict[tuple[str, str], PairValueModel] = {}
@@ -302,7 +302,7 @@ class ModelRegistry:
 def pair_geometry(pair: str) -> ModelGeometry:
     """``(robot 1, robot 2, base of arm 2 in arm 1's frame[, base-distance range])`` of a
     named arm pair (or a swapped one, ``kinova_ur5``, ``kinova_ur5_any``): what
-    :func:`~nehmo_core.planning.pair_frame.match_pair` takes per model."""
+    :func:`~nehmo_core.planning.models.pair_frame.match_pair` takes per model."""
     from nehmo_core.geometry.distance_data import (
         BASE_RANGE,
         CONDITIONED_PAIRS,

@@ -1,0 +1,1 @@
+"""The paper's baselines and peers: naive and reckless planners, CHOMP, OMPL."""

@@ -1,0 +1,1 @@
+"""Solvers of problem Opt: the active-set SQP (Python and C loops) and IPOPT, the reference."""
