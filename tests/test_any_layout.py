@@ -16,9 +16,9 @@ from nehmo_core.geometry.distance_train import new_model
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.hjr.systems.arm_pairs import make_arm_pair_system
 from nehmo_core.hjr.train import resolve_device
-from nehmo_core.planning.models import ModelRegistry, pair_geometry
+from nehmo_core.planning.models.pair_frame import match_pair
+from nehmo_core.planning.models.registry import ModelRegistry, pair_geometry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.pair_frame import match_pair
 from nehmo_core.robots.loader import cell_from_dict, load_cell, load_robot
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
 

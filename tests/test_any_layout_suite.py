@@ -14,8 +14,8 @@ from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.eval.metrics import EpisodeResult, goal_distance
 from nehmo_core.eval.planners import build_planners
-from nehmo_core.planning.models import ModelRegistry
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.models.registry import ModelRegistry
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import draw_scenario_set, load_scenario_set, save_scenario_set
 from nehmo_core.sim.scenarios import Scenario

@@ -10,10 +10,10 @@ import pytest
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.hjr import NetworkSettings
 from nehmo_core.planning.factory import make_planner
+from nehmo_core.planning.models.synthetic import random_value_function
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.synthetic import random_value_function
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 
 FLOOR = PlannerSettings().settled_epsilon  # the default floor of rows against a settled peer

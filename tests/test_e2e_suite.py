@@ -25,8 +25,8 @@ from _ros_testutil import DOMAIN_ID, finish, start
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.metrics import EpisodeResult
 from nehmo_core.eval.planners import build_planners
-from nehmo_core.planning.models import ModelRegistry, parse_value_models
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.models.registry import ModelRegistry, parse_value_models
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import save_scenario_set
 from nehmo_core.sim.scenarios import generate_scenario_set

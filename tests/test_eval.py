@@ -20,12 +20,12 @@ from nehmo_core.eval.scenario_sets import naive_collides, scenario_set_for
 from nehmo_core.eval.setups import get_setup, parse_row
 from nehmo_core.geometry.pybullet_world import CellWorld, Collision
 from nehmo_core.hjr.networks import NetworkSettings
-from nehmo_core.planning.baselines import NaivePlanner
-from nehmo_core.planning.interface import PlanResult, Telemetry
-from nehmo_core.planning.models import parse_value_models
+from nehmo_core.planning.baselines.naive import NaivePlanner
+from nehmo_core.planning.models.registry import parse_value_models
+from nehmo_core.planning.models.synthetic import random_value_function
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.synthetic import random_value_function
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.opt.interface import PlanResult, Telemetry
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenario_files import ScenarioFileError, load_scenario_set, save_scenario_set
@@ -339,7 +339,7 @@ def test_evaluate_command_writes_logs_summary_and_table(tmp_path: Path) -> None:
 
 
 def test_value_model_snapshots_freeze_a_training_run(tmp_path: Path) -> None:
-    from nehmo_core.planning.models import snapshot_value_models
+    from nehmo_core.planning.models.registry import snapshot_value_models
 
     run = tmp_path / "run"
     run.mkdir()

@@ -8,10 +8,10 @@ import pytest
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.exact_guard import closer_than, guard_step
-from nehmo_core.planning.models import ModelRegistry
+from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.stages.exact_guard import closer_than, guard_step
 from nehmo_core.robots import load_cell
 
 DT = 0.04

@@ -16,10 +16,10 @@ from scipy.optimize import linprog
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.planners import build_planners
-from nehmo_core.planning.fail_safe import MaximinFailSafe, maximin_command, worst_case_rates
-from nehmo_core.planning.models import ModelRegistry
+from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.stages.fail_safe import MaximinFailSafe, maximin_command, worst_case_rates
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenario_files import load_scenario_set

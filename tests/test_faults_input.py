@@ -169,7 +169,7 @@ def test_entry_points_print_one_clear_line(results: dict, name: str) -> None:
 )
 def test_bad_model_files_name_the_model_parameter(root: Path, model: str, expected: str) -> None:
     from nehmo_core.errors import NehmoError
-    from nehmo_core.planning.settings import PlannerSettings
+    from nehmo_core.planning.opt.settings import PlannerSettings
     from nehmo_ros.planners import build_planner
 
     cell = load_cell("dual_ur5")
@@ -218,7 +218,7 @@ def test_new_control_parameters_are_checked(changes: dict, expected: str) -> Non
 
 def test_loading_a_model_never_runs_pickled_code(root: Path, results: dict) -> None:
     from nehmo_core.errors import NehmoError
-    from nehmo_core.planning.settings import PlannerSettings
+    from nehmo_core.planning.opt.settings import PlannerSettings
     from nehmo_ros.planners import build_planner
 
     assert results["pickle_model"][0] == 2  # the node, given a pickle

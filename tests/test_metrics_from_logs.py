@@ -39,7 +39,7 @@ from nehmo_core.logs import (
     status_topic,
 )
 from nehmo_core.logs.topics import COLLISIONS_TOPIC, SCENARIO_TOPIC
-from nehmo_core.planning.interface import Telemetry
+from nehmo_core.planning.opt.interface import Telemetry
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenarios import generate_scenario_set
 

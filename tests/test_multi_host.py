@@ -31,7 +31,7 @@ import pytest
 from _ros_testutil import DOMAIN_ID, child_env
 
 from nehmo_core.eval.metrics import EpisodeResult, evaluate_log
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set
 from nehmo_core.sim.scenarios import Scenario, generate_scenario_set, goal_error

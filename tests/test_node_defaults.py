@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_ros.arm_planner import PARAMS
 from nehmo_ros.control import ControlSettings
 

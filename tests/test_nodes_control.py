@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
-from nehmo_core.planning.interface import PlanResult, Telemetry
+from nehmo_core.planning.opt.interface import PlanResult, Telemetry
 from nehmo_core.robots import load_cell
 from nehmo_ros.control import ArmController, ControlSettings, Decision
 
@@ -508,7 +508,7 @@ def test_fault_injection_is_off_by_default() -> None:
 
 
 def test_solver_raise_ends_in_the_planners_own_fail_safe() -> None:
-    from nehmo_core.planning.settings import PlannerSettings
+    from nehmo_core.planning.opt.settings import PlannerSettings
     from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
     from nehmo_ros.planners import build_planner
 

@@ -16,21 +16,21 @@ from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.planners import build_planners
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.hjr.networks import NetworkSettings
-from nehmo_core.planning.baselines import NaivePlanner, TrajectoryTracker, retime
-from nehmo_core.planning.chomp import plan_chomp
+from nehmo_core.planning.baselines.chomp import plan_chomp
+from nehmo_core.planning.baselines.naive import NaivePlanner, TrajectoryTracker, retime
 from nehmo_core.planning.factory import centralized_trackers, make_planner
-from nehmo_core.planning.interface import PlanResult, Telemetry
-from nehmo_core.planning.models import SHIPPED_PAIRS, ModelRegistry, pair_geometry
-from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.pair_frame import (
+from nehmo_core.planning.models.pair_frame import (
     base_yaw_joint,
     inverse_pose,
     match_pair,
     pose_from_matrix,
 )
-from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.synthetic import random_value_function
-from nehmo_core.planning.value_model import PairValueModel
+from nehmo_core.planning.models.registry import SHIPPED_PAIRS, ModelRegistry, pair_geometry
+from nehmo_core.planning.models.synthetic import random_value_function
+from nehmo_core.planning.models.value_model import PairValueModel
+from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.opt.interface import PlanResult, Telemetry
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.robots.loader import cell_from_dict
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
@@ -344,7 +344,7 @@ def test_chomp_plans_all_arms_and_checks_the_result_exactly(seed: int) -> None:
 def test_chomp_unwraps_continuous_joints_only_when_asked() -> None:
     """``wrap_continuous`` (MoveIt's behaviour) aims each continuous joint at the goal's turn
     nearest the start; the default keeps the goal as given, as the paper's baseline does."""
-    from nehmo_core.planning.chomp import ChompSettings
+    from nehmo_core.planning.baselines.chomp import ChompSettings
 
     cell = load_cell("dual_ur5")
     robot = cell.arm("ur5_0").robot
@@ -362,7 +362,7 @@ def test_chomp_unwraps_continuous_joints_only_when_asked() -> None:
 
 
 def test_ompl_rrt_connect_finds_a_collision_free_path() -> None:
-    from nehmo_core.planning.ompl_planner import OmplSettings
+    from nehmo_core.planning.baselines.ompl import OmplSettings
 
     cell = load_cell("dual_ur5")
     scenario = sample_scenario(cell, np.random.default_rng(4))
@@ -384,7 +384,7 @@ def test_ompl_rrt_connect_finds_a_collision_free_path() -> None:
 
 
 def test_ompl_paths_keep_their_clearance_and_endpoints_may_lower_it() -> None:
-    from nehmo_core.planning.ompl_planner import OmplSettings, plan_rrt_connect
+    from nehmo_core.planning.baselines.ompl import OmplSettings, plan_rrt_connect
 
     cell = load_cell("dual_ur5")
     scenario = sample_scenario(cell, np.random.default_rng(4))
@@ -415,7 +415,7 @@ def test_ompl_paths_keep_their_clearance_and_endpoints_may_lower_it() -> None:
 
 
 def test_chomp_check_reports_self_collisions() -> None:
-    from nehmo_core.planning.chomp import _collision_free
+    from nehmo_core.planning.baselines.chomp import _collision_free
 
     cell = load_cell("dual_ur5")
     robot = cell.arm("ur5_0").robot

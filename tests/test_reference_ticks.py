@@ -31,9 +31,9 @@ import pytest
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.planners import build_planners
 from nehmo_core.eval.setups import get_setup, parse_row
-from nehmo_core.planning.models import ModelRegistry
+from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.sim.scenarios import ScenarioSet, generate_scenario_set
 
 DATA = Path(__file__).parent / "data" / "reference_ticks"

@@ -12,9 +12,9 @@ import pytest
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.planners import build_planners
-from nehmo_core.planning.models import ModelRegistry
-from nehmo_core.planning.settings import PAPER_OPT, PlannerSettings
-from nehmo_core.planning.silent_peers import APPROACH, SilentPathWatch
+from nehmo_core.planning.models.registry import ModelRegistry
+from nehmo_core.planning.opt.settings import PAPER_OPT, PlannerSettings
+from nehmo_core.planning.stages.silent_peers import APPROACH, SilentPathWatch
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import load_scenario_set
 

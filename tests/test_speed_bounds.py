@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.planning.models import ModelRegistry
+from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.speed_bounds import PeerBounds
+from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.stages.speed_bounds import PeerBounds
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
 

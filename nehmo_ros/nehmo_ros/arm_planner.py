@@ -13,8 +13,8 @@
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once a second, at once when not OK;
 - publishes ``/<id>/planner/speed_bound`` (std_msgs/Float64) with every command, the speed bound
   the arm keeps (a share of ``u_max``; 1: none), and subscribes to every peer's: a peer that
-  keeps its bound is planned against it (:mod:`nehmo_core.planning.speed_bounds`). Planners that
-  announce nothing (``naive``, ``reckless``, ...) publish nothing there, so peers treat them as
+  keeps its bound is planned against it (:mod:`nehmo_core.planning.stages.speed_bounds`). Planners
+  that announce nothing (``naive``, ``reckless``, ...) publish nothing there, so peers treat them as
   silent.
 
 The solve runs in a worker thread (:class:`nehmo_ros.control.ArmController`): the command of
@@ -69,7 +69,7 @@ from nehmo_core.logs.topics import (
     speed_bound_topic,
     status_topic,
 )
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_ros.control import ArmController, ControlSettings, Decision
 from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
 from nehmo_ros.node_support import (

@@ -24,7 +24,7 @@ Rules, in order of precedence, for the command of a tick:
 5. the solver failed, was infeasible or late inside ``plan`` → the planner's fail-safe;
 6. otherwise the planner's command.
 
-Peers' announced speed bounds (:mod:`nehmo_core.planning.speed_bounds`) reach the controller
+Peers' announced speed bounds (:mod:`nehmo_core.planning.stages.speed_bounds`) reach the controller
 through :meth:`ArmController.announce`; each valid joint state is checked against them, and the
 planner plans every peer against the bound it still keeps. The arm's own announcement is
 :attr:`ArmController.announcement` (1 for planners that announce nothing).
@@ -56,8 +56,8 @@ from typing import Any, cast
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
-from nehmo_core.planning.interface import Planner, Telemetry
-from nehmo_core.planning.speed_bounds import FULL_SPEED, PeerBounds
+from nehmo_core.planning.opt.interface import Planner, Telemetry
+from nehmo_core.planning.stages.speed_bounds import FULL_SPEED, PeerBounds
 from nehmo_core.robots.model import Cell
 from nehmo_ros.solve_worker import Decision, Observation, SolveWorker, zeros
 from nehmo_ros.state_buffer import StateBuffer, order_joints

@@ -47,8 +47,8 @@ import numpy as np
 from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, reached
 from nehmo_core.eval.scenario_sets import naive_collides
-from nehmo_core.planning.interface import Planner
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.interface import Planner
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.cell_sim import CellSimulator

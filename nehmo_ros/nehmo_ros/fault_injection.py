@@ -28,7 +28,7 @@ from typing import Any
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.planning.interface import Planner, PlanResult
+from nehmo_core.planning.opt.interface import Planner, PlanResult
 
 __all__ = ["FAULT_KINDS", "FaultInjectingPlanner", "FaultSpec", "InjectedFault", "parse_fault"]
 

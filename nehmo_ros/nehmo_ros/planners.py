@@ -1,8 +1,8 @@
 """Build one arm's planner from node parameters, with the planning model registry.
 
 The node's ``model`` parameter is a value-model source list for
-:mod:`nehmo_core.planning.models` (the registry the batch runner uses too), so a ROS run and a
-batch run of the same row use the very same pair models:
+:mod:`nehmo_core.planning.models.registry` (the registry the batch runner uses too), so a ROS run
+and a batch run of the same row use the very same pair models:
 
 ``shipped``    the shipped value functions of the cell's robot pairs (variant per planner kind:
                nehmo, nehmo_paper → bc+sym, nehmo_no_sym → bc, opt_deepreach → deepreach);
@@ -22,10 +22,10 @@ import numpy as np
 
 from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
 from nehmo_core.planning.factory import DECENTRALIZED, make_planner
-from nehmo_core.planning.interface import Planner
-from nehmo_core.planning.models import OPT_KINDS, model_registry
+from nehmo_core.planning.models.registry import OPT_KINDS, model_registry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.planning.opt.interface import Planner
+from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
 __all__ = ["build_planner", "warm_up"]

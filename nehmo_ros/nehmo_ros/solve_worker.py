@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from nehmo_core.planning.interface import Telemetry
+from nehmo_core.planning.opt.interface import Telemetry
 
 __all__ = ["WAITING", "Decision", "Observation", "SolveWorker"]
 

@@ -54,7 +54,7 @@ def check_row_and_model(planner: str, model: str) -> None:
     of the row (one, or one per arm joined by '/') and each source of ``model``."""
     from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS
     from nehmo_core.planning.factory import DECENTRALIZED
-    from nehmo_core.planning.models import SYNTHETIC, model_sources
+    from nehmo_core.planning.models.registry import SYNTHETIC, model_sources
 
     for kind in planner.split("/"):
         if kind not in DECENTRALIZED:
