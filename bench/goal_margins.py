@@ -51,10 +51,10 @@ def goal_margin(
     worst = np.inf
     for arm, planner in planners.items():
         peers = {a: q for a, q in goal.items() if a != arm}
-        now = planner._current(goal[arm], peers, dict.fromkeys(planner.pairs, bound))
+        now = planner.current(goal[arm], peers, dict.fromkeys(planner.pairs, bound))
         if not now.ids:
             continue
-        problem = planner._problem(np.zeros(planner.robot.dof), now)
+        problem = planner.problem(np.zeros(planner.robot.dof), now)
         c, _ = problem.constraints.evaluate(np.zeros(planner.robot.dof))
         worst = min(worst, float(c.min()))
     return worst

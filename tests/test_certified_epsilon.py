@@ -95,8 +95,8 @@ def test_a_slow_peers_rows_carry_their_margin_into_opt(model: PairValueModel) ->
     planner = _planner(dataclasses.replace(model, certificates=certs))
     q = np.zeros(6)
     for bound, margin in ((1.0, 0.09), (0.2, FLOOR)):
-        now = planner._current(q, {"ur5_1": q}, {"ur5_1": bound})
-        problem = planner._problem(q - 0.5, now)
+        now = planner.current(q, {"ur5_1": q}, {"ur5_1": bound})
+        problem = planner.problem(q - 0.5, now)
         assert problem.constraints.margins == pytest.approx((margin,))
         cons = problem.constraints
         c, _ = cons.evaluate(np.zeros(6))

@@ -230,7 +230,7 @@ def _sandwiched_states(planner: NehmoPlanner, seed: int, count: int) -> list[dic
     found: list[dict] = []
     for _ in range(200_000):
         q = {a: rng.uniform(lo, hi) for a in CELL.arm_ids}
-        now = planner._current(q["ur5_1"], {p: q[p] for p in PEERS})
+        now = planner.current(q["ur5_1"], {p: q[p] for p in PEERS})
         v = now.values
         if not (v.min() > 0.02 and v.max() < 0.25 and abs(v[0] - v[1]) < 0.05):
             continue
@@ -253,8 +253,8 @@ def _episode(planner: NehmoPlanner, q0: dict, ticks: int = 25, dt: float = 0.04)
     flips, previous = 0, None
     for _ in range(ticks):
         q = sim.positions()
-        now = planner._current(q["ur5_1"], {p: q[p] for p in PEERS})
-        u = planner._hji_fail_safe(now, planner.settings.u_max)
+        now = planner.current(q["ur5_1"], {p: q[p] for p in PEERS})
+        u = planner.stage("fail_safe").command(now, planner.settings.u_max)
         commands = {"ur5_1": u}
         for i, peer in enumerate(now.ids):
             commands[peer] = -D * np.sign(now.grads[i][6:])

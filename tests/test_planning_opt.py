@@ -61,7 +61,7 @@ def _near_contact(model: PairValueModel, seed: int, count: int) -> list[tuple[np
         if not 0.06 <= v[0] <= 0.2:
             continue
         goal = q1 - rng.uniform(0.3, 1.5) * np.sign(g[0, :6]) + rng.normal(0, 0.2, 6)
-        problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
+        problem = planner.problem(q1 - goal, planner.current(q1, {PEER: q2}))
         c_naive, _ = problem.constraints.evaluate(problem.naive_step())
         c_still, _ = problem.constraints.evaluate(np.zeros(6))
         if c_naive[0] < 0 < c_still[0]:
@@ -83,8 +83,8 @@ def test_worst_case_disturbance_is_the_box_corner_minimizer() -> None:
 def test_planner_predicts_peers_with_the_brute_force_worst_case(model: PairValueModel) -> None:
     planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     q1, q2, goal = _near_contact(model, 1, 1)[0]
-    now = planner._current(q1, {PEER: q2})
-    problem = planner._problem(q1 - goal, now)
+    now = planner.current(q1, {PEER: q2})
+    problem = planner.problem(q1 - goal, now)
     predicted = problem.constraints.groups[0][1][0]
     corners = np.array(list(itertools.product([-0.5, 0.5], repeat=6)))
     worst = corners[np.argmin(corners @ now.grads[0][6:])]
@@ -163,7 +163,7 @@ def test_a_nan_row_at_the_naive_step_is_not_taken_for_a_safe_one(model, in_c) ->
     overflow) is not satisfied: the naive step is not returned, whatever the other rows say."""
     planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     q1 = np.array([0.0, -2.4, 1.5, -1.6, -1.5, 0.0])  # the V row far from active
-    problem = planner._problem(np.full(6, -0.01), planner._current(q1, {PEER: q1.copy()}))
+    problem = planner.problem(np.full(6, -0.01), planner.current(q1, {PEER: q1.copy()}))
     assert solve_sqp(problem, np.zeros(6), native=in_c).status == "naive"
     rows = SelfClearanceRows(np.eye(6)[:1], np.array([np.nan]), np.array([0.05]), (("a", "b"),))
     poisoned = replace(problem, constraints=replace(problem.constraints, linear=rows))
@@ -194,7 +194,7 @@ def test_sqp_returns_the_ipopt_solution(model: PairValueModel) -> None:
     reference = IpoptSolver(tol=1e-10, max_iter=300)
     compared = 0
     for q1, q2, goal in _near_contact(model, 4, 40):
-        problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
+        problem = planner.problem(q1 - goal, planner.current(q1, {PEER: q2}))
         fast = solve_sqp(problem, np.zeros(6), tol=1e-9)
         if fast.status != "optimal":
             continue
@@ -227,14 +227,14 @@ def _multi_peer_problems(
     out = []
     for _ in range(20000):
         q = {a: sample_configuration(five.arm(a).robot, rng) for a in five.arm_ids}
-        now = planner._current(q["ur5_0"], q)
+        now = planner.current(q["ur5_0"], q)
         first, second = np.argsort(now.values)[:2]
         if now.values[first] < 0.06 or now.values[second if two_contacts else first] > 0.25:
             continue
         g = now.grads[first][:6] / np.linalg.norm(now.grads[first][:6])
         if two_contacts:
             g = g + now.grads[second][:6] / np.linalg.norm(now.grads[second][:6])
-        problem = planner._problem(rng.uniform(0.3, 1.5) * g / np.abs(g).max(), now)
+        problem = planner.problem(rng.uniform(0.3, 1.5) * g / np.abs(g).max(), now)
         c, _ = problem.constraints.evaluate(problem.naive_step())
         if c.min() < 0.0 and c.max() >= 0.0:
             out.append(problem)
@@ -417,9 +417,9 @@ def test_c_loop_returns_the_python_loops_answers(model) -> None:
     planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     problems = []
     for q1, q2, goal in _near_contact(model, 5, 15):
-        now = planner._current(q1, {PEER: q2})
-        problems.append(planner._problem(q1 - goal, now))
-        problems.append(planner._problem(q1 - goal, now, planner._self_rows(q1)))
+        now = planner.current(q1, {PEER: q2})
+        problems.append(planner.problem(q1 - goal, now))
+        problems.append(planner.problem(q1 - goal, now, planner.rows(q1)))
     problems += _multi_peer_problems(model, 11, 15, two_contacts=True)
     statuses = set()
     for problem in problems:
@@ -514,7 +514,7 @@ def test_c_loop_steps_aside_for_models_without_generated_code(model) -> None:
     assert native.loop().model(on_vm) is None
     planner = NehmoPlanner(CELL, OWN, [on_vm], UNHURRIED)
     q1, q2, goal = _near_contact(model, 6, 1)[0]
-    problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
+    problem = planner.problem(q1 - goal, planner.current(q1, {PEER: q2}))
     _assert_same_solve(
         solve_sqp(problem, np.zeros(6)), solve_sqp(problem, np.zeros(6), native=False)
     )
@@ -523,7 +523,7 @@ def test_c_loop_steps_aside_for_models_without_generated_code(model) -> None:
 def test_c_loop_reports_a_passed_deadline(model) -> None:
     planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED)
     q1, q2, goal = _near_contact(model, 7, 1)[0]
-    problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
+    problem = planner.problem(q1 - goal, planner.current(q1, {PEER: q2}))
     late = solve_sqp(problem, np.zeros(6), deadline=time.perf_counter() - 1.0)
     assert late.status == "timeout"
     assert late.iterations == 1
@@ -542,7 +542,7 @@ def test_default_ipopt_settings_agree_with_sqp_within_their_tolerance(model) -> 
     paper = IpoptSolver()  # tol 1e-3, max_iter 30, limited-memory Hessian
     compared = 0
     for q1, q2, goal in _near_contact(model, 5, 10):
-        problem = planner._problem(q1 - goal, planner._current(q1, {PEER: q2}))
+        problem = planner.problem(q1 - goal, planner.current(q1, {PEER: q2}))
         fast = solve_sqp(problem, np.zeros(6))
         ref = paper.solve(problem, np.zeros(6))
         if fast.status == "optimal" and ref.status == "optimal":
@@ -627,8 +627,8 @@ def test_escape_length_doubles_until_the_goal_error_reaches_a_new_low(model) -> 
     def feed(errors: list[float]) -> list[int]:
         left = []
         for e in errors:
-            planner._track_stall(np.array([e, 0, 0, 0, 0, 0]), pressed=True)
-            left.append(planner._escape_left)
+            planner.stage("escape").track(np.array([e, 0, 0, 0, 0, 0]), pressed=True)
+            left.append(planner.stage("escape").escape_left)
         return left
 
     feed([1.0, 0.9])  # progress toward a new low
@@ -650,7 +650,7 @@ def test_an_arm_held_at_its_goal_against_a_peer_yields_then_returns(model) -> No
     planner = NehmoPlanner(CELL, OWN, [model], settings)
     while True:  # the own arm at its goal, the peer pressing it (V row within stall_margin)
         q1, q2 = sample_configuration(robot, rng), sample_configuration(robot, rng)
-        problem = planner._problem(np.zeros(6), planner._current(q1, {PEER: q2}))
+        problem = planner.problem(np.zeros(6), planner.current(q1, {PEER: q2}))
         c_still, _ = problem.constraints.evaluate(np.zeros(6))
         if 0.0 <= c_still[0] < 0.005:
             break
@@ -815,7 +815,7 @@ def _into_an_escape(planner: NehmoPlanner, q1, q2, goal) -> np.ndarray:
         result = planner.plan(q1, {PEER: q2}, goal)
         q1 = q1 + 0.04 * result.velocity
         if result.telemetry.escaping:
-            assert planner._escape_left > 0  # the escape goes on for more calls
+            assert planner.stage("escape").escape_left > 0  # the escape goes on for more calls
             return q1
     raise AssertionError("the stall was not detected")
 
@@ -838,8 +838,9 @@ def test_a_new_goal_ends_an_escape_and_is_followed_at_once(model) -> None:
     cosine = result.velocity @ toward / np.linalg.norm(result.velocity) / np.linalg.norm(toward)
     assert cosine > 0.9
     # the stall and escape state restarted from the new goal
-    assert planner._escape_left == 0 and planner._stall == 0 and planner._escapes == 0
-    assert planner._best_error == pytest.approx(np.linalg.norm(q - new_goal))
+    escape = planner.stage("escape")
+    assert escape.escape_left == 0 and escape.stall == 0 and escape.escapes == 0  # type: ignore[attr-defined]
+    assert escape.best_error == pytest.approx(np.linalg.norm(q - new_goal))  # type: ignore[attr-defined]
 
 
 def test_fail_safe_ticks_during_an_escape_are_not_reported_as_escaping(model) -> None:
@@ -851,7 +852,9 @@ def test_fail_safe_ticks_during_an_escape_are_not_reported_as_escaping(model) ->
     solver.fail = True
     result = planner.plan(q, {PEER: q2}, goal)
     assert result.telemetry.fail_safe and not result.telemetry.escaping
-    assert planner._escape_left > 0  # the escape itself goes on after the fail-safe tick
+    assert (
+        planner.stage("escape").escape_left > 0
+    )  # the escape itself goes on after the fail-safe tick
 
 
 _PEER_Q = f"peers[{PEER!r}]"
@@ -928,13 +931,13 @@ def test_the_fail_safe_and_the_solve_of_one_state_share_one_evaluation(model) ->
     )
     q1, q2, goal = _near_contact(model, 8, 1)[0]
     evaluations = []
-    evaluate = planner._evaluate_current
+    evaluate = planner.evaluate
 
     def counted(*args):  # type: ignore[no-untyped-def]
         evaluations.append(args)
         return evaluate(*args)
 
-    planner._evaluate_current = counted  # type: ignore[method-assign]
+    planner.evaluate = counted  # type: ignore[method-assign]
     planner.fail_safe(q1, {PEER: q2})
     first = planner.plan(q1, {PEER: q2}, goal)
     assert len(evaluations) == 1

@@ -10,8 +10,8 @@ import pytest
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.opt.peer_bounds import PeerBounds
 from nehmo_core.planning.opt.settings import PlannerSettings
-from nehmo_core.planning.stages.speed_bounds import PeerBounds
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
 
@@ -108,8 +108,8 @@ def _pushing_states(planner: NehmoPlanner, bound: float, count: int) -> list[tup
     while len(found) < count:
         q1 = rng.uniform(-np.pi, np.pi, 6) * [1, 0.5, 0.6, 1, 1, 1]
         q2 = rng.uniform(-np.pi, np.pi, 6) * [1, 0.5, 0.6, 1, 1, 1]
-        now = planner._current(q1, {PEER: q2}, {PEER: bound})
-        full = planner._current(q1, {PEER: q2}, {PEER: 1.0})
+        now = planner.current(q1, {PEER: q2}, {PEER: bound})
+        full = planner.current(q1, {PEER: q2}, {PEER: 1.0})
         if not (full.values[0] >= 0.08 and now.values[0] <= 0.25):
             continue
         sim.reset({OWN: q1, PEER: q2})
@@ -133,7 +133,7 @@ def _run(planner: NehmoPlanner, q1, q2, goal, bound: float, announce: bool) -> t
             q = sim.positions()
             told = {PEER: bound} if announce else None
             u = planner.plan(q[OWN], {PEER: q[PEER]}, goal, told).velocity
-            now = planner._current(q[OWN], {PEER: q[PEER]}, {PEER: bound})
+            now = planner.current(q[OWN], {PEER: q[PEER]}, {PEER: bound})
             d = -bound * D * np.sign(now.grads[0][6:])
             if sim.step({OWN: u, PEER: d}, DT).collisions:
                 return True, np.inf
@@ -200,7 +200,7 @@ def test_a_peer_that_announces_full_speed_is_held_to_half_its_settled_margin(
     slow = {PEER: 0.2}
 
     def value(peers: dict) -> float:
-        return float(probe._evaluate_current(q_own, peers, [PEER], slow).values[0])
+        return float(probe.evaluate(q_own, peers, [PEER], slow).values[0])
 
     # the states fall where the test means them to
     assert 0.5 * margin < value(near) < probe.settings.epsilon

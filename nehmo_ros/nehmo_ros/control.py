@@ -57,7 +57,7 @@ import numpy as np
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.planning.opt.interface import Planner, Telemetry
-from nehmo_core.planning.stages.speed_bounds import FULL_SPEED, PeerBounds
+from nehmo_core.planning.opt.peer_bounds import FULL_SPEED, PeerBounds
 from nehmo_core.robots.model import Cell
 from nehmo_ros.solve_worker import Decision, Observation, SolveWorker, zeros
 from nehmo_ros.state_buffer import StateBuffer, order_joints

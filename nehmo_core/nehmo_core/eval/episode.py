@@ -30,7 +30,7 @@ from nehmo_core.eval.telemetry import status_message
 from nehmo_core.geometry.pybullet_world import Collision
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.interface import Planner
-from nehmo_core.planning.stages.speed_bounds import PeerBounds
+from nehmo_core.planning.opt.peer_bounds import PeerBounds
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenarios import Scenario

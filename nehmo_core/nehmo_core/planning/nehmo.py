@@ -1,30 +1,24 @@
-"""The NeHMO planner of one arm: Algorithm 1 of the paper with problem Opt.
+"""The NeHMO planner of one arm: Algorithm 1 of the paper with problem Opt, and its stages.
 
-Every tick: map each peer in reach into a trained pair model's frame; evaluate ``V`` and ``∇V``
-of all pairs at ``τ = t_plan`` from the current state (one batched call per model); predict each
-peer under its worst case ``dⁱ = −d̄·sign(∂V/∂qⁱ)``; solve Opt; and if the solve fails, is
-infeasible or misses the deadline, apply the fail-safe ``u = ū·sign(∂V/∂q¹)`` of the most
-critical pair (the smallest ``V``), i.e. the HJI optimal control of that pair. With
-``self_clearance`` on (the default; not in the paper), Opt also carries the arm's self-collision
-damper rows and the fail-safe is projected onto them (:mod:`.self_clearance`). Peers out of
-reach are skipped; peers in reach that no model fits are reported as unmodelled (they are not
+Every tick (:meth:`NehmoPlanner.plan`): map each peer in reach into a trained pair model's frame;
+evaluate ``V`` and ``∇V`` of all pairs at ``τ = t_plan`` from the current state (one batched call
+per model); predict each peer under its worst case ``dⁱ = −d̄·sign(∂V/∂qⁱ)``; solve Opt; and if
+the solve fails, is infeasible or misses the deadline, apply the fail-safe
+``u = ū·sign(∂V/∂q¹)`` of the most critical pair, the HJI optimal control of that pair. Peers out
+of reach are skipped; peers in reach that no model fits are reported as unmodelled (they are not
 constrained, so a caller must treat them as a configuration error or accept the risk).
 
-Not in the paper, on by default: the stall escape (``escape``, :mod:`.stall_escape`) leaves a
-local minimum on the safe set, or yields the goal, through Opt solutions with the same
-constraints (safety unchanged); the exact guard (``exact_guard``, :mod:`.exact_guard`) shortens
-a step that would bring the arm's real geometry too close to a peer holding at its goal.
+Around that core run the stages the settings switch on (:mod:`nehmo_core.planning.opt.pipeline`
+says what each kind may change; :mod:`nehmo_core.planning.stages` holds them, all off in the
+``paper`` preset): an announcer of speed bounds, row providers, objectives, command filters and
+a fallback other than the paper's.
 """
 
 from __future__ import annotations
 
 import math
 import time
-import zlib
-from collections import deque
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -34,6 +28,7 @@ from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.models.margins import CertifiedMargins
 from nehmo_core.planning.models.pair_frame import constrained_pairs
 from nehmo_core.planning.models.value_model import PairValueModel
+from nehmo_core.planning.opt.fail_safe import HjiFailSafe
 from nehmo_core.planning.opt.interface import (
     PlanResult,
     Telemetry,
@@ -41,48 +36,28 @@ from nehmo_core.planning.opt.interface import (
     goal_error,
     one_joint_vector,
 )
-from nehmo_core.planning.opt.problem import Constraints, OptProblem, worst_case_disturbance
+from nehmo_core.planning.opt.peer_bounds import FULL_SPEED, check_bound
+from nehmo_core.planning.opt.pipeline import (
+    Announcer,
+    CommandFilter,
+    Fallback,
+    Objective,
+    RowProvider,
+    Stage,
+)
+from nehmo_core.planning.opt.problem import Constraints, LinearRows, OptProblem, project_step
+from nehmo_core.planning.opt.problem import worst_case_disturbance as worst_case
 from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.planning.solvers.base import OptSolver, SqpSolver, make_solver
 from nehmo_core.planning.solvers.native import loop
-from nehmo_core.planning.stages.exact_guard import GUARD_NEAR, closer_than, guard_step, prepare
-from nehmo_core.planning.stages.fail_safe import MaximinFailSafe, maximin_command
-from nehmo_core.planning.stages.self_clearance import SelfClearance, SelfClearanceRows, project_step
-from nehmo_core.planning.stages.silent_peers import SilentPathWatch
-from nehmo_core.planning.stages.speed_bounds import FULL_SPEED, check_bound
-from nehmo_core.planning.stages.stall_escape import StallEscape
+from nehmo_core.planning.stages import build_stages
 from nehmo_core.robots.model import Cell
 
 __all__ = ["NehmoPlanner"]
 
 
-def _peer_vectors(cell: Cell, arm_id: str, peers: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]:
-    """:func:`check_peers`, with one joint vector per peer (no batches)."""
-    checked = check_peers(cell, arm_id, peers)
-    return {p: one_joint_vector(q, f"peers[{p!r}]") for p, q in checked.items()}
-
-
-@dataclass(frozen=True)
-class _Peers:
-    """One tick's constrained peers: current pair states, values and gradients."""
-
-    ids: list[str]
-    model_index: list[int]
-    states: list[np.ndarray]  # (n_i,) current pair state per peer
-    values: np.ndarray  # (k,) V(b_i·t_plan, x) [m]
-    grads: list[np.ndarray]  # (n_i,) ∇ₓV per peer
-    bounds: np.ndarray  # (k,) each peer's speed bound b_i, a fraction of d̄ (1: none)
-
-    @cached_property
-    def groups(self) -> list[tuple[int, float, list[int]]]:
-        """``(model index, bound, members)`` of the peers that share a model and a bound."""
-        keys = list(zip(self.model_index, self.bounds.tolist(), strict=True))
-        return [
-            (m, b, [i for i, key in enumerate(keys) if key == (m, b)]) for m, b in sorted(set(keys))
-        ]
-
-
-class NehmoPlanner(StallEscape):
+class NehmoPlanner:
     """NeHMO (or Opt + any pair value model) for arm ``arm_id`` of ``cell``."""
 
     def __init__(
@@ -95,8 +70,7 @@ class NehmoPlanner(StallEscape):
     ) -> None:
         self.cell = cell
         self.arm_id = arm_id
-        self.arm = cell.arm(arm_id)
-        self.robot = self.arm.robot
+        self.robot = cell.arm(arm_id).robot
         self.settings = settings or PlannerSettings()
         self.models = list(models)
         for model in self.models:
@@ -116,115 +90,84 @@ class NehmoPlanner(StallEscape):
         self.pairs, self.peers_skipped, self.peers_unmodelled = constrained_pairs(
             cell, arm_id, [m.geometry for m in self.models], self.settings.reach_margin
         )
-        used = [m.model_index for m in self.pairs.values()]
-        self.margins = CertifiedMargins(self.models, self.settings, used)
-        self.epsilon_source = self.margins.source
-        self.settings = self.settings.replace(epsilon=self.margins.epsilon)
-        self.reset()
         s = self.settings
-        if s.exact_guard > 0.0 and s.hold_bound < FULL_SPEED and self.pairs:
-            prepare(cell)
-        self.self_clearance = (
-            SelfClearance(self.robot, s.self_influence, s.self_safety, s.self_gain)
-            if s.self_clearance
-            else None
+        self.margins = CertifiedMargins(
+            self.models,
+            [m.model_index for m in self.pairs.values()],
+            s.epsilon,
+            s.settled_epsilon,
+            s.t_safe,
+            s.certified_epsilon,
         )
+        self.epsilon_source = self.margins.source
+        self.settings = s.replace(epsilon=self.margins.epsilon)
+        staged = build_stages(self)
+        self.stages: tuple[Stage, ...] = staged.all
+        self._announcer: Announcer | None = staged.announcer
+        self._row_providers: tuple[RowProvider, ...] = staged.rows
+        self._objectives: tuple[Objective, ...] = staged.objectives
+        self._filters: tuple[CommandFilter, ...] = staged.filters
+        self._fallback: Fallback = staged.fallback or HjiFailSafe(
+            self.robot.dof, s.fail_safe_deadband
+        )
+        self.reset()
+
+    def stage(self, name: str) -> Stage:
+        """The stage named ``name`` (its settings group); KeyError if it is off."""
+        for s in (*self.stages, self._fallback):
+            if s.name == name:
+                return s
+        raise KeyError(f"no stage {name!r} in this planner (on: {[s.name for s in self.stages]})")
+
+    def reset(self) -> None:
+        """Forget everything of the last episode (stages included)."""
+        self._last_current: tuple[object, PeerValues] | None = None  # see current()
+        # the last solution, the next solve's start; None: start at the naive step (at reset, and
+        # after a fail-safe step, a corner of the box that says nothing about the next solution)
+        self._warm: np.ndarray | None = None
+        self._hessian: np.ndarray | None = None  # the last solve's Lagrangian Hessian estimate
+        self._fallback.reset()
+        for stage in self.stages:
+            stage.reset()
+
+    # -- what stages and tools read ---------------------------------------------------------
+    @property
+    def announcement(self) -> float:
+        """The speed bound this arm announced with its latest command (a fraction of ū)."""
+        return self._announcer.announcement if self._announcer is not None else FULL_SPEED
+
+    @property
+    def speed_cap(self) -> float:
+        """The fraction of ū this arm's commands keep (see the announcer stage)."""
+        return self._announcer.speed_cap if self._announcer is not None else FULL_SPEED
+
+    @property
+    def guarded(self) -> int:
+        """Commands the command filters shortened since the last reset."""
+        return sum(f.shortened for f in self._filters)
 
     def group_margin(self, model_index: int, bound: float) -> float:
         """The margin [m] of model ``model_index``'s rows against peers planned at ``bound`` of
         full speed (:meth:`~nehmo_core.planning.models.margins.CertifiedMargins.group`)."""
         return self.margins.group(model_index, bound)
 
-    def _self_rows(self, q: np.ndarray) -> SelfClearanceRows | None:
-        return self.self_clearance.rows(q) if self.self_clearance is not None else None
+    def rows(self, q: np.ndarray) -> LinearRows | None:
+        """The row providers' rows at ``q`` (None without a row provider)."""
+        if not self._row_providers:
+            return None
+        if len(self._row_providers) == 1:
+            return self._row_providers[0].rows(q)
+        parts = [p.rows(q) for p in self._row_providers]
+        return LinearRows(np.vstack([r.A for r in parts]), np.concatenate([r.b for r in parts]))
 
-    def _within_self_clearance(self, u: np.ndarray, rows: SelfClearanceRows | None) -> np.ndarray:
-        """``u`` [rad/s], or the nearest command whose step keeps the self-clearance rows."""
+    def keep_rows(self, u: np.ndarray, rows: LinearRows | None) -> np.ndarray:
+        """``u`` [rad/s], or the nearest command whose step keeps ``rows``."""
         if rows is None or rows.count == 0:
             return u
         t = self.settings.t_plan
         return project_step(t * u, rows, t * self.settings.u_max) / t
 
-    def reset(self) -> None:
-        self._maximin = MaximinFailSafe(self.settings.fail_safe_band)
-        # this arm's recent announcements (newest last); its commands keep the smallest
-        self._announced = deque([FULL_SPEED], maxlen=self.settings.bound_release_ticks + 1)
-        self._holding = False  # settled at the goal, announcing hold_bound
-        self._last_current: tuple[object, _Peers] | None = None  # see _current
-        # the last solution, the next solve's start; None: start at the naive step (at reset, and
-        # after a fail-safe step, a corner of the box that says nothing about the next solution)
-        self._warm: np.ndarray | None = None
-        self._hessian: np.ndarray | None = None  # the last solve's Lagrangian Hessian estimate
-        seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape_seed
-        self._rng = np.random.default_rng(seed)
-        self._clear_stall()
-        self.guarded = 0  # commands the exact guard shortened (planning/stages/exact_guard.py)
-        s = self.settings
-        robots = {p: self.cell.arm(p).robot for p in self.pairs}
-        self._watch = SilentPathWatch(
-            s.silent_lookahead, s.silent_clearance, s.tick, s.d_max, robots
-        )
-
-    # -- announced speed bound ---------------------------------------------------------------
-    def _announce(
-        self,
-        error0: np.ndarray,
-        q: np.ndarray,
-        peers: Mapping[str, np.ndarray],
-        bounds: Mapping[str, float],
-        participants: frozenset[str],
-    ) -> float:
-        """This command's announcement (a fraction of ū; see :mod:`.speed_bounds`): hold_bound
-        from within hold_tolerance of the goal until beyond hold_release, or until a peer breaks
-        the slow game (:meth:`_threatened`), else full speed."""
-        s = self.settings
-        if s.hold_bound < FULL_SPEED:
-            e = float(np.linalg.norm(error0))
-            live = self._holding or e <= s.hold_tolerance  # else the threat test cannot matter
-            if e > s.hold_release or (live and self._threatened(q, peers, bounds, participants)):
-                self._holding = False
-            elif e <= s.hold_tolerance:
-                self._holding = True
-        announced = s.hold_bound if self._holding else FULL_SPEED
-        self._announced.append(announced)
-        return announced
-
-    def _threatened(
-        self,
-        q: np.ndarray,
-        peers: Mapping[str, np.ndarray],
-        bounds: Mapping[str, float],
-        participants: frozenset[str],
-    ) -> bool:
-        """Whether a peer at full speed has broken the slow game with this arm near its goal:
-        a participant (it plans against this arm's bound ``k`` and keeps ``V(k·t_safe)`` at its
-        settled margin) brings ``V(k·t_plan)`` below half that margin, a peer that announces
-        nothing below ε, or either comes within ``exact_guard`` of the real geometry. Either
-        is fled from at full speed, after the withdrawal (:mod:`.speed_bounds`)."""
-        s = self.settings
-        ids = [p for p in self.pairs if bounds[p] >= FULL_SPEED]
-        if not ids:
-            return False
-        slow = self._evaluate_current(q, peers, ids, dict.fromkeys(ids, s.hold_bound))
-        half = [0.5 * self.group_margin(self.pairs[p].model_index, s.hold_bound) for p in ids]
-        floor = [h if p in participants else s.epsilon for p, h in zip(ids, half, strict=True)]
-        if np.any(slow.values < np.array(floor)):
-            return True
-        near = {p: peers[p] for p, v in zip(ids, slow.values, strict=True) if v < GUARD_NEAR}
-        return closer_than(self.cell, self.arm_id, q, near, s.exact_guard)
-
-    @property
-    def announcement(self) -> float:
-        """The speed bound this arm announced with its latest command (a fraction of ū)."""
-        return self._announced[-1]
-
-    @property
-    def speed_cap(self) -> float:
-        """The fraction of ū this arm's commands keep: the smallest of its announcements of
-        the last ``bound_release_ticks`` commands and this one (a withdrawal is heard first)."""
-        return min(self._announced)
-
-    def _peer_bounds(self, peer_bounds: Mapping[str, float] | None) -> dict[str, float]:
+    def peer_bounds(self, peer_bounds: Mapping[str, float] | None) -> dict[str, float]:
         """Each constrained peer's bound (1 unless given)."""
         given = peer_bounds or {}
         return {
@@ -232,96 +175,76 @@ class NehmoPlanner(StallEscape):
             for p in self.pairs
         }
 
-    # -- one tick -----------------------------------------------------------------------------
-    def _current(
+    def current(
         self,
         q: np.ndarray,
         peers: Mapping[str, np.ndarray],
         bounds: Mapping[str, float] | None = None,
         only_known: bool = False,
-    ) -> _Peers:
+    ) -> PeerValues:
         """The constrained peers' pair states, ``V`` and ``∇V`` at ``τ = b·t_plan`` now (``b``
         the peer's speed bound). The last answer is kept: a node asks for the fail-safe ahead of
         each solve from the same state, and the solve then reuses its evaluation."""
         ids = [p for p in self.pairs if p in peers] if only_known else list(self.pairs)
         if bounds is None:
-            bounds = self._peer_bounds(None)
+            bounds = self.peer_bounds(None)
         key = (q.tobytes(), tuple((p, peers[p].tobytes(), bounds[p]) for p in ids))
         if self._last_current is not None and self._last_current[0] == key:
             return self._last_current[1]
-        now = self._evaluate_current(q, peers, ids, bounds)
+        now = self.evaluate(q, peers, ids, bounds)
         self._last_current = (key, now)
         return now
 
-    def _evaluate_current(
+    def evaluate(
         self,
         q: np.ndarray,
         peers: Mapping[str, np.ndarray],
         ids: list[str],
         bounds: Mapping[str, float],
-    ) -> _Peers:
+    ) -> PeerValues:
+        """``V`` and ``∇V`` at ``τ = b·t_plan`` of the pairs with peers ``ids`` (uncached)."""
         index = [self.pairs[p].model_index for p in ids]
         states = [self.pairs[p].state(q, peers[p]) for p in ids]
         values = np.empty(len(ids))
         grads: list[np.ndarray] = [np.empty(0)] * len(ids)
-        now = _Peers(ids, index, states, values, grads, np.array([bounds[p] for p in ids]))
-        for m, b, rows in now.groups:
+        now = PeerValues(ids, index, states, values, grads, np.array([bounds[p] for p in ids]))
+        for m, b, members in now.groups:
             v, g = self.models[m].evaluate(
-                b * self.settings.t_plan, np.array([states[i] for i in rows])
+                b * self.settings.t_plan, np.array([states[i] for i in members])
             )
-            for k, i in enumerate(rows):
+            for k, i in enumerate(members):
                 values[i], grads[i] = v[k], g[k]
         return now
 
-    def _problem(
+    def problem(
         self,
-        error0: np.ndarray,
-        now: _Peers,
-        self_rows: SelfClearanceRows | None = None,
+        target: np.ndarray,
+        now: PeerValues,
+        rows: LinearRows | None = None,
         cap: float = FULL_SPEED,
     ) -> OptProblem:
+        """Problem Opt toward ``target`` (a stand-in for ``e₀``): the V rows of every
+        constrained peer at its predicted worst case, ``rows`` after them."""
         s, n1 = self.settings, self.robot.dof
         groups, horizons, margins = [], [], []
         for m, b, members in now.groups:
             predicted = np.array([now.states[i] for i in members])
             n12 = n1 + self.models[m].n2  # a conditioned model's r (after q²) never moves
             peer_grads = np.array([now.grads[i][n1:n12] for i in members])
-            predicted[:, n1:n12] += s.t_plan * worst_case_disturbance(peer_grads, b * s.d_max)
+            predicted[:, n1:n12] += s.t_plan * worst_case(peer_grads, b * s.d_max)
             groups.append((m, predicted))
             horizons.append(b * s.t_safe)
             margins.append(self.group_margin(m, b))
         constraints = Constraints(
-            self.models, groups, s.t_safe, s.epsilon, self_rows, tuple(horizons), tuple(margins)
+            self.models, groups, s.t_safe, s.epsilon, rows, tuple(horizons), tuple(margins)
         )
-        return OptProblem(error0, s.t_plan * s.u_max * cap, s.t_plan, constraints)
+        return OptProblem(target, s.t_plan * s.u_max * cap, s.t_plan, constraints)
 
-    def _fail_safe(
-        self, now: _Peers, rows: SelfClearanceRows | None = None, cap: float = FULL_SPEED
+    def fail_safe_command(
+        self, now: PeerValues, rows: LinearRows | None = None, cap: float = FULL_SPEED
     ) -> np.ndarray:
-        u = self._hji_fail_safe(now, cap * self.settings.u_max)
-        return self._within_self_clearance(u, rows)
-
-    def _hji_fail_safe(self, now: _Peers, u_max: float) -> np.ndarray:
-        s, n1 = self.settings, self.robot.dof
-        if s.fail_safe == "maximin" and len(now.ids) > 1:
-            chosen = self._maximin.critical(now.ids, now.values)
-            own = np.array([now.grads[i][:n1] for i in chosen])
-            peer = np.array(
-                [now.grads[i][n1 : n1 + self.models[now.model_index[i]].n2] for i in chosen]
-            )
-            values = now.values[chosen]
-            d_max = s.d_max * now.bounds[chosen]
-            return maximin_command(
-                own, peer, u_max, d_max, values, s.t_plan, s.fail_safe_slack, s.fail_safe_harm
-            )
-        critical = int(np.argmin(now.values))
-        g = now.grads[critical][: self.robot.dof]
-        u = u_max * np.sign(g)
-        if self.settings.fail_safe_deadband > 0.0:
-            # joints that barely change V need not sweep at full speed (they cost V at most
-            # ū·Σ|g_j| over the dead joints, and may fold the arm into itself)
-            u[np.abs(g) < self.settings.fail_safe_deadband * np.abs(g).max()] = 0.0
-        return u
+        """The fallback's command within ``cap·ū``, kept within ``rows``."""
+        return self.keep_rows(self._fallback.command(now, cap * self.settings.u_max), rows)
 
     def fail_safe(
         self,
@@ -330,10 +253,8 @@ class NehmoPlanner(StallEscape):
         peer_bounds: Mapping[str, float] | None = None,
     ) -> np.ndarray:
         """The fail-safe command (dof,) [rad/s] at this state: ``ū·sign(∂V/∂q¹)`` of the most
-        critical constrained peer, or with ``fail_safe="maximin"`` the command that keeps every
-        critical pair's worst-case V rate as high as possible (with self-clearance on, the
-        nearest command that keeps the arm's self-clearance rows); zero (hold) when no peer is
-        constrained.
+        critical constrained peer (or the fallback stage's command, e.g. maximin), kept within
+        the row providers' rows; zero (hold) when no peer is constrained.
 
         Cheap (one value-and-gradient evaluation); a ROS node computes it ahead of each solve
         so that a solve that overruns its tick still has a safe command to fall back on (a solve
@@ -345,9 +266,10 @@ class NehmoPlanner(StallEscape):
         others = _peer_vectors(self.cell, self.arm_id, peers)
         if not any(p in others for p in self.pairs):
             return np.zeros(self.robot.dof)
-        now = self._current(q, others, self._peer_bounds(peer_bounds), only_known=True)
-        return self._fail_safe(now, self._self_rows(q), self.speed_cap)
+        now = self.current(q, others, self.peer_bounds(peer_bounds), only_known=True)
+        return self.fail_safe_command(now, self.rows(q), self.speed_cap)
 
+    # -- one tick -----------------------------------------------------------------------------
     def plan(
         self,
         q_self: ArrayLike,
@@ -358,12 +280,76 @@ class NehmoPlanner(StallEscape):
         """One tick: the command for ``q_self`` among ``peers`` toward ``q_goal``.
 
         ``peer_bounds``: the speed bound (a fraction of d̄) each peer has announced and still
-        keeps (:class:`~nehmo_core.planning.stages.speed_bounds.PeerBounds`); the peers in it take
-        part in the announcements (they plan against this arm's), missing peers are planned at 1 and
-        treated as silent. The command's own announcement is ``telemetry.speed_bound``.
+        keeps (:class:`~nehmo_core.planning.opt.peer_bounds.PeerBounds`); the peers in it take
+        part in the announcements (they plan against this arm's), missing peers are planned at 1
+        and treated as silent. The command's own announcement is ``telemetry.speed_bound``.
         """
         start = time.perf_counter()
         deadline = start + self.settings.deadline
+        tick = self._tick(q_self, peers, q_goal, peer_bounds)
+        for objective in self._objectives:
+            objective.begin(tick)
+        if self._announcer is not None:
+            self._announcer.announce(tick)
+        info: dict[str, Any] = {
+            "peers_constrained": tuple(self.pairs),
+            "peers_skipped": self.peers_skipped,
+            "peers_unmodelled": self.peers_unmodelled,
+            "speed_bound": tick.announced,
+        }
+        s = self.settings
+        tick.rows = self.rows(tick.q)
+        if not self.pairs:
+            y_max = s.t_plan * s.u_max * tick.cap
+            u = self.keep_rows(np.clip(-tick.error0, -y_max, y_max) / s.t_plan, tick.rows)
+            self._warm = u * s.t_plan
+            return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
+        now = tick.now = self.current(tick.q, tick.peers, tick.bounds)
+        target = self._target(tick, now)
+        problem = self.problem(target, now, tick.rows, tick.cap)
+        result, status = self._solve(problem, deadline)
+        late = time.perf_counter() > deadline
+        if late and result is not None and result.success:
+            status = "timeout"
+        if result is not None and result.success and not late:
+            u = problem.velocity(result.y)
+            self._warm = result.y
+            if result.hessian is not None:
+                self._hessian = result.hessian
+            value_rows = result.constraint[: len(now.ids)]  # V rows first, then linear rows
+            min_constraint = float(value_rows.min()) if len(value_rows) else math.nan
+            fail_safe = False
+        else:
+            u = self.fail_safe_command(now, tick.rows, tick.cap)
+            self._warm = None
+            min_constraint, fail_safe = math.nan, True
+        for command_filter in self._filters:
+            u = command_filter.filter(tick, now, u)
+        for objective in self._objectives:
+            objective.after(tick, min_constraint)
+        steered = {o.flag: tick.steered_by == o.name and not fail_safe for o in self._objectives}
+        telemetry = Telemetry(
+            solve_time=time.perf_counter() - start,
+            status=status,
+            fail_safe=fail_safe,
+            min_value=float(now.values.min()),
+            min_constraint=min_constraint,
+            iterations=result.iterations if result is not None else 0,
+            critical_peer=now.ids[now.critical],
+            escaping=steered.get("escaping", False),
+            evading=steered.get("evading", False),
+            **info,
+        )
+        return PlanResult(u, telemetry)
+
+    def _tick(
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        q_goal: ArrayLike,
+        peer_bounds: Mapping[str, float] | None,
+    ) -> Tick:
+        """The call's inputs, checked."""
         q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
         goal = one_joint_vector(self.robot.check_q(q_goal, "q_goal"), "q_goal")
         others = _peer_vectors(self.cell, self.arm_id, peers)
@@ -372,77 +358,37 @@ class NehmoPlanner(StallEscape):
             raise InvalidValueError(
                 "peers", f"must include every constrained arm {missing}", list(others)
             )
-        if self._goal is None or not np.array_equal(goal, self._goal):
-            # a new goal (a controller need not call reset() between goals): a stall or an
-            # escape toward the old one says nothing about the new one
-            self._clear_stall()
-            self._goal = goal.copy()
-        error0 = goal_error(q, goal, self.robot, self.settings.wrap_goal)
-        bounds = self._peer_bounds(peer_bounds)
-        participants = frozenset(p for p in peer_bounds or {} if p in self.pairs)
-        announced = self._announce(error0, q, others, bounds, participants)
-        cap = self.speed_cap
-        info: dict[str, Any] = {
-            "peers_constrained": tuple(self.pairs),
-            "peers_skipped": self.peers_skipped,
-            "peers_unmodelled": self.peers_unmodelled,
-            "speed_bound": announced,
-        }
-        rows = self._self_rows(q)
-        if not self.pairs:
-            y_max = self.settings.t_plan * self.settings.u_max * cap
-            y = np.clip(-error0, -y_max, y_max)
-            u = self._within_self_clearance(y / self.settings.t_plan, rows)
-            self._warm = u * self.settings.t_plan
-            return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
-        now = self._current(q, others, bounds)
-        escaping = self.settings.escape and self._escape_left > 0
-        away = self._watch.target(
-            self.models, now.ids, now.model_index, now.states, now.values,
-            self._watch.velocities(others, participants), self.robot.dof,
-            self.settings.t_plan, self.settings.t_plan * self.settings.u_max * cap,
-        )  # fmt: skip
-        target = self._escape_error(now) if escaping else error0
-        problem = self._problem(target if away is None else away, now, rows, cap)
+        return Tick(
+            q=q,
+            goal=goal,
+            error0=goal_error(q, goal, self.robot, self.settings.wrap_goal),
+            peers=others,
+            bounds=self.peer_bounds(peer_bounds),
+            participants=frozenset(p for p in peer_bounds or {} if p in self.pairs),
+        )
+
+    def _target(self, tick: Tick, now: PeerValues) -> np.ndarray:
+        """Opt's target this tick: the first objective stage's stand-in for ``e₀`` (every
+        objective sees every tick), else ``e₀``."""
+        targets = [(o.name, o.target(tick, now)) for o in self._objectives]
+        for name, target in targets:
+            if target is not None:
+                tick.steered_by = name
+                return target
+        return tick.error0
+
+    def _solve(self, problem: OptProblem, deadline: float) -> tuple[Any, str]:
+        """The solver's result from the warm start (None if it crashed) and its status."""
         try:
             hessian = self._hessian if self.settings.sqp_warm_hessian else None
             y_start = problem.naive_step() if self._warm is None else self._warm
             result = self.solver(problem, y_start, deadline, hessian)
-            status = result.status
+            return result, result.status
         except Exception as exc:  # any solver crash must end in the fail-safe
-            result, status = None, f"failed ({type(exc).__name__})"
-        late = time.perf_counter() > deadline
-        if late and result is not None and result.success:
-            status = "timeout"
-        critical = now.ids[int(np.argmin(now.values))]
-        if result is not None and result.success and not late:
-            u = problem.velocity(result.y)
-            self._warm = result.y
-            if result.hessian is not None:
-                self._hessian = result.hessian
-            value_rows = result.constraint[: len(now.ids)]  # V rows first, then self-clearance
-            min_constraint = float(value_rows.min()) if len(value_rows) else math.nan
-            fail_safe = False
-        else:
-            u = self._fail_safe(now, rows, cap)
-            self._warm = None
-            min_constraint, fail_safe = math.nan, True
-        near = [p for p, v in zip(now.ids, now.values, strict=True) if v < GUARD_NEAR]
-        held = {p: others[p] for p in near if p in participants and bounds[p] < FULL_SPEED}
-        share = guard_step(self.cell, self.arm_id, q, u, held, self.settings)
-        u, self.guarded = u * share, self.guarded + (share < 1.0)
-        if self.settings.escape and away is None:  # stepping aside is no stall
-            self._track_stall(error0, min_constraint < self.settings.stall_margin)
-        telemetry = Telemetry(
-            solve_time=time.perf_counter() - start,
-            status=status,
-            fail_safe=fail_safe,
-            min_value=float(now.values.min()),
-            min_constraint=min_constraint,
-            iterations=result.iterations if result is not None else 0,
-            critical_peer=critical,
-            escaping=escaping and away is None and not fail_safe,  # else it followed no escape
-            evading=away is not None and not fail_safe,
-            **info,
-        )
-        return PlanResult(u, telemetry)
+            return None, f"failed ({type(exc).__name__})"
+
+
+def _peer_vectors(cell: Cell, arm_id: str, peers: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]:
+    """:func:`check_peers`, with one joint vector per peer (no batches)."""
+    checked = check_peers(cell, arm_id, peers)
+    return {p: one_joint_vector(q, f"peers[{p!r}]") for p, q in checked.items()}

@@ -19,35 +19,41 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from nehmo_core.planning.models.value_model import PairValueModel
-from nehmo_core.planning.opt.settings import PlannerSettings
 
 
 class CertifiedMargins:
-    """Margins of one planner's models under ``settings`` (ε as given is the floor); ``used``:
-    the indices of the models its pairs map onto."""
+    """Margins of one planner's models; ``used``: the indices of the models its pairs map onto;
+    ``epsilon`` [m] the floor (raised to the certified δ at ``t_safe`` [s] when ``certified``),
+    ``settled_epsilon`` [m] the floor of rows against a peer that announced a bound."""
 
     def __init__(
-        self, models: Sequence[PairValueModel], settings: PlannerSettings, used: Sequence[int]
+        self,
+        models: Sequence[PairValueModel],
+        used: Sequence[int],
+        epsilon: float,
+        settled_epsilon: float,
+        t_safe: float,
+        certified: bool = True,
     ) -> None:
         self.models = list(models)
-        self.settings = settings
-        self.floor = settings.epsilon
-        self.settled_floor = settings.settled_epsilon
+        self.floor = epsilon
+        self.settled_floor = settled_epsilon
+        self.t_safe = t_safe
+        self.certified = certified
         self.epsilon, self.source = self._reported(sorted(set(used)))
         self._cache: dict[tuple[int, float], float] = {}
 
     def _reported(self, used: list[int]) -> tuple[float, str]:
         """The reported ε and a line saying where it came from."""
-        s = self.settings
-        if not s.certified_epsilon:
-            return s.epsilon, f"ε = {s.epsilon:g} m, fixed"
-        levels = {self.models[i].name: self.models[i].certified_level(s.t_safe) for i in used}
+        if not self.certified:
+            return self.floor, f"ε = {self.floor:g} m, fixed"
+        levels = {self.models[i].name: self.models[i].certified_level(self.t_safe) for i in used}
         certified = {name: d for name, d in levels.items() if d is not None}
         missing = sorted(name for name, d in levels.items() if d is None)
-        epsilon = max([s.epsilon, *certified.values()])
+        epsilon = max([self.floor, *certified.values()])
         deltas = ", ".join(f"{name} {d:.4g}" for name, d in sorted(certified.items()))
-        note = f"ε = {epsilon:.4g} m: max(floor {s.epsilon:g}"
-        note += f", certified δ at t_safe {s.t_safe:g} s: {deltas})" if deltas else ")"
+        note = f"ε = {epsilon:.4g} m: max(floor {self.floor:g}"
+        note += f", certified δ at t_safe {self.t_safe:g} s: {deltas})" if deltas else ")"
         note += (
             f"; rows against a settled peer keep max({self.settled_floor:g}, their model's δ at"
             " that horizon)"
@@ -62,9 +68,8 @@ class CertifiedMargins:
         certificate that long, or without certified margins."""
         key = (model_index, bound)
         if key not in self._cache:
-            s = self.settings
-            slow = s.certified_epsilon and bound < 1.0
-            found = self.models[model_index].certified_margin(bound * s.t_safe) if slow else None
+            slow = self.certified and bound < 1.0
+            found = self.models[model_index].certified_margin(bound * self.t_safe) if slow else None
             margin = (
                 self.epsilon if found is None else min(self.epsilon, max(self.settled_floor, found))
             )

@@ -24,14 +24,45 @@ from typing import cast
 import numpy as np
 
 from nehmo_core.planning.models.value_model import PairValueModel
-from nehmo_core.planning.stages.self_clearance import SelfClearanceRows
+from nehmo_core.planning.numerics.qp import qp_step
 
-__all__ = ["Constraints", "OptProblem", "worst_case_disturbance"]
+__all__ = ["Constraints", "LinearRows", "OptProblem", "project_step", "worst_case_disturbance"]
 
 
 def worst_case_disturbance(grad_peer: np.ndarray, d_max: float) -> np.ndarray:
     """``d = −d̄·sign(∂V/∂q_peer)`` (…, n2) [rad/s]: minimizes ``⟨∇_{q_peer}V, d⟩`` over the box."""
     return -d_max * np.sign(grad_peer)
+
+
+@dataclass(frozen=True)
+class LinearRows:
+    """Linear rows ``A·y ≥ b`` on the step (a row provider's, e.g. self-clearance)."""
+
+    A: np.ndarray  # (k, n)
+    b: np.ndarray  # (k,)
+
+    @property
+    def count(self) -> int:
+        return len(self.b)
+
+    def satisfied(self, y: np.ndarray, tol: float = 1e-9) -> bool:
+        return bool(np.all(self.A @ y >= self.b - tol))
+
+
+def project_step(target: np.ndarray, rows: LinearRows, y_max: float) -> np.ndarray:
+    """The step closest to ``target`` that satisfies ``rows`` within the box ``|y_j| ≤ y_max``.
+
+    ``y = 0`` must satisfy the rows (a row provider's promise); this returns zero only if the
+    QP solver fails.
+    """
+    target = np.clip(target, -y_max, y_max)
+    if rows.count == 0 or rows.satisfied(target):
+        return target
+    n = len(target)
+    step = qp_step(
+        2.0 * np.eye(n), -2.0 * target, -rows.b, rows.A, np.full(n, -y_max), np.full(n, y_max)
+    )
+    return step.p if step.feasible else np.zeros(n)
 
 
 @dataclass(frozen=True)
@@ -42,7 +73,7 @@ class Constraints:
     groups: Sequence[tuple[int, np.ndarray]]  # (model index, base states (k, n)) per model
     t_safe: float
     epsilon: float
-    linear: SelfClearanceRows | None = None  # self-clearance rows A·y ≥ b, after the V rows
+    linear: LinearRows | None = None  # a row provider's rows A·y ≥ b, after the V rows
     # time-to-go [s] of each group's V rows; None: t_safe for every group
     horizons: tuple[float, ...] | None = None
     # margin [m] each group's V rows must keep (V ≥ margin); None: epsilon for every group

@@ -1,1 +1,82 @@
-"""What NeHMO adds to the paper's Opt, one mechanism per module (each off in the paper preset)."""
+"""What NeHMO adds to the paper's Opt, one mechanism per module, each a stage of the planner
+(:mod:`nehmo_core.planning.opt.pipeline` defines the kinds) with its own settings and each off in
+the ``paper`` preset:
+
+=======================  ==================  ===================================================
+stage (settings group)   kind                what it changes; what it keeps
+=======================  ==================  ===================================================
+``hold``                 announcer           announces a speed bound at the goal and keeps it;
+(:mod:`.speed_bounds`)                       the V rows against every peer's worst case stay
+``self_clearance``       row provider        adds self-collision damper rows; V rows stay
+``silent_watch``         objective           steps out of a silent peer's path; V rows stay
+(:mod:`.silent_peers`)
+``escape``               objective           leaves a stall on the safe set; V rows stay
+(:mod:`.stall_escape`)
+``exact_guard``          command filter      shortens a step toward a holding peer's real
+                                             geometry; never lengthens one
+``fail_safe``            fallback            maximin over every critical peer instead of the
+                                             paper's single most critical one
+=======================  ==================  ===================================================
+
+:func:`build_stages` makes the stages a planner's settings switch on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
+from nehmo_core.planning.opt.pipeline import (
+    Announcer,
+    CommandFilter,
+    Fallback,
+    Host,
+    Objective,
+    RowProvider,
+    Stage,
+)
+from nehmo_core.planning.stages.exact_guard import ExactGuard
+from nehmo_core.planning.stages.fail_safe import MaximinFallback
+from nehmo_core.planning.stages.self_clearance import SelfClearance
+from nehmo_core.planning.stages.silent_peers import SilentPeers
+from nehmo_core.planning.stages.speed_bounds import HoldAnnouncer
+from nehmo_core.planning.stages.stall_escape import StallEscape
+
+__all__ = ["Staged", "build_stages"]
+
+
+@dataclass(frozen=True)
+class Staged:
+    """A planner's stages by kind (objectives in priority order: the first target wins)."""
+
+    announcer: Announcer | None
+    rows: tuple[RowProvider, ...]
+    objectives: tuple[Objective, ...]
+    filters: tuple[CommandFilter, ...]
+    fallback: Fallback | None
+
+    @property
+    def all(self) -> tuple[Stage, ...]:
+        """Every stage but the fallback."""
+        head: tuple[Stage, ...] = () if self.announcer is None else (self.announcer,)
+        return (*head, *self.rows, *self.objectives, *self.filters)
+
+
+def build_stages(host: Host) -> Staged:
+    """The stages ``host.settings`` switch on, built for ``host``."""
+    s = host.settings
+    objectives: list[Objective] = []
+    if s.silent_lookahead > 0.0:  # before the escape: stepping aside wins over escaping
+        objectives.append(SilentPeers(host))
+    if s.escape:
+        objectives.append(StallEscape(host))
+    rows: tuple[RowProvider, ...] = ()
+    if s.self_clearance:
+        rows = (SelfClearance(host.robot, s.self_influence, s.self_safety, s.self_gain),)
+    return Staged(
+        announcer=HoldAnnouncer(host) if s.hold_bound < FULL_SPEED else None,
+        rows=rows,
+        objectives=tuple(objectives),
+        filters=(ExactGuard(host),) if s.exact_guard > 0.0 else (),
+        fallback=MaximinFallback(host) if s.fail_safe == "maximin" else None,
+    )

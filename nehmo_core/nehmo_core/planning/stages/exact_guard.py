@@ -1,5 +1,8 @@
 """The exact-geometry guard of a NeHMO arm beside peers that hold still at their goals.
 
+A command filter stage (settings ``exact_guard`` [m]; 0, the ``paper`` preset, turns it off). It
+only shortens a command (to ½, ¼ or nothing); the V rows against every peer's worst case stay.
+
 Against a peer that announced a speed bound (it holds at its goal, :mod:`.speed_bounds`) the
 value rows keep only the settled margin, and the learned distance under them can err by a few
 centimetres near contact. The guard closes that gap with the arms' real geometry: before a
@@ -22,10 +25,13 @@ from collections.abc import Mapping
 import numpy as np
 
 from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
+from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.robots.model import Cell
 
-__all__ = ["GUARD_NEAR", "closer_than", "guard_step", "prepare"]
+__all__ = ["GUARD_NEAR", "ExactGuard", "closer_than", "guard_step", "prepare"]
 
 GUARD_NEAR = 0.15
 """Only peers whose ``V`` now reads below this [m] are checked (the learned values err by a few
@@ -97,3 +103,30 @@ def closer_than(
     world = _world(cell)
     world.set_configuration(peers)
     return _closest(world, arm_id, q, peers, 2.0 * floor) < floor
+
+
+class ExactGuard:
+    """The ``exact_guard`` command filter of one planner."""
+
+    name = "exact_guard"
+
+    def __init__(self, host: Host) -> None:
+        self.host = host
+        self.shortened = 0
+        if host.settings.hold_bound < FULL_SPEED and host.pairs:
+            prepare(host.cell)  # build the world now, not in the first tick
+
+    def reset(self) -> None:
+        self.shortened = 0
+
+    def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
+        """``u`` shortened by :func:`guard_step` against the peers near now that keep an
+        announced bound (they take part in the announcements)."""
+        near = [p for p, v in zip(now.ids, now.values, strict=True) if v < GUARD_NEAR]
+        held = {
+            p: tick.peers[p] for p in near if p in tick.participants and tick.bounds[p] < FULL_SPEED
+        }
+        host = self.host
+        share = guard_step(host.cell, host.arm_id, tick.q, u, held, host.settings)
+        self.shortened += share < 1.0
+        return u * share

@@ -1,5 +1,9 @@
 """The fail-safe against several critical peers at once.
 
+A fallback stage (settings ``fail_safe = "maximin"``, ``fail_safe_band``, ``fail_safe_slack``,
+``fail_safe_harm``; ``"single"``, the ``paper`` preset, keeps the paper's fail-safe). It changes
+only the command applied when Opt fails; with one constrained peer it is the paper's.
+
 The paper's fail-safe ``ū·sign(∂V/∂q¹)`` follows one pair, the most critical. An arm between two
 peers whose values are close then switches between two opposite commands from one tick to the
 next and can be pushed into either peer. The *maximin* fail-safe takes every peer whose value is
@@ -37,8 +41,11 @@ import numpy as np
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.numerics.qp import qp_step
+from nehmo_core.planning.opt.fail_safe import HjiFailSafe
+from nehmo_core.planning.opt.pipeline import Host
+from nehmo_core.planning.opt.tick import PeerValues
 
-__all__ = ["MaximinFailSafe", "maximin_command", "worst_case_rates"]
+__all__ = ["MaximinFailSafe", "MaximinFallback", "maximin_command", "worst_case_rates"]
 
 
 def worst_case_rates(
@@ -157,3 +164,38 @@ class MaximinFailSafe:
         ]
         self._critical = {ids[i] for i in chosen}
         return chosen
+
+
+class MaximinFallback:
+    """The ``fail_safe`` fallback of one planner: maximin over the critical peers, the paper's
+    command when one peer is constrained."""
+
+    name = "fail_safe"
+
+    def __init__(self, host: Host) -> None:
+        self.host = host
+        s = host.settings
+        self.critical = MaximinFailSafe(s.fail_safe_band)
+        self.single = HjiFailSafe(host.robot.dof, s.fail_safe_deadband)
+
+    def reset(self) -> None:
+        self.critical.reset()
+
+    def command(self, now: PeerValues, u_max: float) -> np.ndarray:
+        if len(now.ids) < 2:
+            return self.single.command(now, u_max)
+        s, n1, models = self.host.settings, self.host.robot.dof, self.host.models
+        chosen = self.critical.critical(now.ids, now.values)
+        own = np.array([now.grads[i][:n1] for i in chosen])
+        peer = np.array([now.grads[i][n1 : n1 + models[now.model_index[i]].n2] for i in chosen])
+        d_max = s.d_max * now.bounds[chosen]
+        return maximin_command(
+            own,
+            peer,
+            u_max,
+            d_max,
+            now.values[chosen],
+            s.t_plan,
+            s.fail_safe_slack,
+            s.fail_safe_harm,
+        )

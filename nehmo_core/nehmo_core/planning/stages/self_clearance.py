@@ -25,27 +25,19 @@ import pybullet as pb
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.numerics.qp import qp_step
+from nehmo_core.planning.opt.problem import LinearRows, project_step
 from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel
 
 __all__ = ["SelfClearance", "SelfClearanceRows", "project_step"]
 
 
 @dataclass(frozen=True)
-class SelfClearanceRows:
-    """Linear constraints ``A·y ≥ b`` on the step, one per near link pair, and their pairs."""
+class SelfClearanceRows(LinearRows):
+    """The damper rows ``A·y ≥ b`` (``A``: ∇d [m/rad]; ``b = −ξ·max(d − d_s, 0)`` [m], ≤ 0),
+    one per near link pair, with the pairs' distances ``d`` [m] and names."""
 
-    A: np.ndarray  # (k, n) ∇d [m/rad]
-    b: np.ndarray  # (k,) −ξ·max(d − d_s, 0) [m], ≤ 0
     distances: np.ndarray  # (k,) d [m]
     pairs: tuple[tuple[str, str], ...]
-
-    @property
-    def count(self) -> int:
-        return len(self.b)
-
-    def satisfied(self, y: np.ndarray, tol: float = 1e-9) -> bool:
-        return bool(np.all(self.A @ y >= self.b - tol))
 
 
 MIN_GRADIENT = 1e-4
@@ -74,27 +66,19 @@ query sets the joints first), and how many instances use it. A world per instanc
 a PyBullet client (~30 MB) alive for every planner ever built, since planners are not closed."""
 
 
-def project_step(target: np.ndarray, rows: SelfClearanceRows, y_max: float) -> np.ndarray:
-    """The step closest to ``target`` that satisfies ``rows`` within the box ``|y_j| ≤ y_max``.
-
-    ``y = 0`` is always feasible, so this returns zero only if the QP solver fails.
-    """
-    target = np.clip(target, -y_max, y_max)
-    if rows.count == 0 or rows.satisfied(target):
-        return target
-    n = len(target)
-    step = qp_step(
-        2.0 * np.eye(n), -2.0 * target, -rows.b, rows.A, np.full(n, -y_max), np.full(n, y_max)
-    )
-    return step.p if step.feasible else np.zeros(n)
-
-
 def _empty_rows(n: int) -> SelfClearanceRows:
     return SelfClearanceRows(np.zeros((0, n)), np.zeros(0), np.zeros(0), ())
 
 
 class SelfClearance:
-    """Builds the damper rows of ``robot`` at a joint vector (own PyBullet client)."""
+    """Builds the damper rows of ``robot`` at a joint vector (own PyBullet client): the
+    ``self_clearance`` row provider of a planner (settings ``self_influence``, ``self_safety``,
+    ``self_gain``). It adds rows; the V rows stay."""
+
+    name = "self_clearance"
+
+    def reset(self) -> None:
+        """The rows depend on the joint vector only (a cache of the last one is kept)."""
 
     def __init__(
         self,

@@ -1,5 +1,9 @@
 """Stepping out of the way of a peer that announces nothing (not in the paper).
 
+An objective stage (settings ``silent_lookahead`` [s], ``silent_clearance`` [m], ``tick`` [s];
+``silent_lookahead = 0``, the ``paper`` preset, turns it off). It changes only Opt's target; the
+V rows against every peer's worst case stay.
+
 A peer that takes no part in the speed announcements (a reckless or foreign arm) is planned at
 full speed, as the paper does: the V rows hold against its worst case ``t_safe`` ahead. They
 say nothing about where it is going. An arm that keeps heading for its goal until those rows
@@ -26,9 +30,11 @@ from collections.abc import Collection, Mapping, Sequence
 import numpy as np
 
 from nehmo_core.planning.models.value_model import PairValueModel
+from nehmo_core.planning.opt.pipeline import Host
+from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.robots.model import RobotModel
 
-__all__ = ["APPROACH", "SilentPathWatch"]
+__all__ = ["APPROACH", "SilentPathWatch", "SilentPeers"]
 
 #: [m] a predicted V must be this much below the current one to count as an approach.
 APPROACH = 0.02
@@ -112,3 +118,36 @@ class SilentPathWatch:
             return None
         peak = float(np.abs(worst[1]).max())
         return None if peak < 1e-9 else -(step / peak) * worst[1]
+
+
+class SilentPeers:
+    """The ``silent_watch`` objective of one planner: a :class:`SilentPathWatch` over its
+    constrained peers."""
+
+    name = "silent_watch"
+    flag = "evading"
+
+    def __init__(self, host: Host) -> None:
+        self.host = host
+        s = host.settings
+        robots = {p: host.cell.arm(p).robot for p in host.pairs}
+        self.watch = SilentPathWatch(
+            s.silent_lookahead, s.silent_clearance, s.tick, s.d_max, robots
+        )
+
+    def reset(self) -> None:
+        self.watch.reset()
+
+    def begin(self, tick: Tick) -> None:
+        """Nothing to do before the tick."""
+
+    def target(self, tick: Tick, now: PeerValues) -> np.ndarray | None:
+        s, host = self.host.settings, self.host
+        velocities = self.watch.velocities(tick.peers, tick.participants)
+        return self.watch.target(
+            host.models, now.ids, now.model_index, now.states, now.values, velocities,
+            host.robot.dof, s.t_plan, s.t_plan * s.u_max * tick.cap,
+        )  # fmt: skip
+
+    def after(self, tick: Tick, min_constraint: float) -> None:
+        """Nothing to do after the tick."""

@@ -1,137 +1,91 @@
-"""Announced speed bounds: a peer that promises to move slowly is planned against its promise
-for as long as its observed motion keeps it.
+"""Announced speed bounds, the announcing side: an arm settled at its goal promises to move
+slowly, so its peers may plan against ``V(k·t_safe)`` instead of ``V(t_safe)`` with it.
 
-Time rescaling gives the bound without a new value function. With ``q̇¹ = u``, ``q̇² = d``,
-``|u|∞ ≤ ū`` and ``|d|∞ ≤ d̄``, a peer that keeps ``|d|∞ ≤ k·d̄`` (``0 ≤ k ≤ 1``) can be answered
-by the arm with ``|u|∞ ≤ k·ū``, which is the full-speed game slowed down by ``k``; a larger
-control set can only help the arm, so
+An announcer stage (settings ``hold_bound``, ``hold_tolerance``, ``hold_release``,
+``bound_release_ticks``; ``hold_bound = 1``, the ``paper`` preset, announces nothing). It
+changes the share of ū this arm's commands keep and what it announces; the V rows against every
+peer's worst case stay (why a kept bound is safe: :mod:`nehmo_core.planning.opt.peer_bounds`).
 
-    V_{ū, k·d̄}(τ, x)  ≥  V_{k·ū, k·d̄}(τ, x)  =  V(k·τ, x),
-
-and ``V(k·t_safe, x) ≥ ε`` keeps the paper's guarantee against that peer with the value function
-already trained (``V(0, x) = l(x)``: a peer that holds still is as far as it is).
-
-The promise is made by a NeHMO arm that has settled at its goal (:class:`NehmoPlanner` with
-``hold_bound < 1``): it announces ``k = hold_bound`` with every command and keeps its own
-commands within ``k·ū`` from then on, including its fail-safe. A withdrawal (a new goal,
-drifting beyond ``hold_release``, or a threat) is announced ``release_ticks`` commands before
-the arm moves faster, so peers hear it before it matters. The threat: a NeHMO peer (one that
-announces, even only full speed) plans against the settled arm's bound and so keeps
-``V(k·t_safe)`` at or above its settled margin with it; it is a threat only when it brings
+A NeHMO arm within ``hold_tolerance`` of its goal announces ``k = hold_bound`` with every command
+and keeps its own commands within ``k·ū`` from then on, including its fail-safe. A withdrawal (a
+new goal, drifting beyond ``hold_release``, or a threat) is announced ``bound_release_ticks``
+commands before the arm moves faster, so peers hear it before it matters. The threat: a NeHMO
+peer (one that announces, even only full speed) plans against the settled arm's bound and so
+keeps ``V(k·t_safe)`` at or above its settled margin with it; it is a threat only when it brings
 ``V(k·t_plan)`` below half that margin (beyond what its linearized steps can explain). A peer
 that announces nothing is a threat as soon as it brings ``V(k·t_plan)`` below ε (a reckless arm).
-Either is a threat within ``exact_guard`` of the real geometry (:func:`.exact_guard.closer_than`).
-Either way the settled arm withdraws to flee at full speed. The price that remains: the two
-commands before the arm may speed up.
-
-:class:`PeerBounds` is the receiving side: it keeps each peer's announcement and checks the
-peer's observed motion against it; the tick a peer moves faster than it announced (with a
-small tolerance), the peer is planned against ``d̄`` again, until it withdraws its
-announcement and makes a new one. A peer that announces nothing is planned against ``d̄``.
+Either is a threat within ``exact_guard`` of the real geometry
+(:func:`nehmo_core.planning.stages.exact_guard.closer_than`). Either way the settled arm
+withdraws to flee at full speed. The price that remains: the two commands before the arm may
+speed up.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable
-from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
 
-from nehmo_core.errors import InvalidValueError
+from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
+from nehmo_core.planning.opt.pipeline import Host
+from nehmo_core.planning.opt.tick import Tick
+from nehmo_core.planning.stages.exact_guard import GUARD_NEAR, closer_than
 
-__all__ = ["FULL_SPEED", "PeerBounds", "check_bound"]
-
-FULL_SPEED = 1.0  # the announcement of an arm that promises nothing
-
-
-def check_bound(value: float, parameter: str = "speed bound") -> float:
-    """``value`` as a speed-bound fraction, or :class:`InvalidValueError` unless in [0, 1]."""
-    value = float(value)
-    if not 0.0 <= value <= 1.0:
-        raise InvalidValueError(parameter, "must lie in [0, 1] (a fraction of d̄)", value)
-    return value
+__all__ = ["HoldAnnouncer"]
 
 
-@dataclass
-class _Peer:
-    announced: deque[float]  # the most recent announcements, newest last
-    q: np.ndarray | None = None
-    t: float = 0.0
-    broken: bool = False  # moved faster than announced; distrusted until it re-announces
-    breaches: int = 0
-    heard: bool = False  # has announced at all: it takes part in the announcements
+class HoldAnnouncer:
+    """The hold at the goal: this arm's announcements and the speed cap they imply."""
 
+    name = "hold"
 
-class PeerBounds:
-    """Each peer's announced bound, trusted while the peer's observed motion keeps it.
-
-    ``d_max`` [rad/s] is the peers' full speed; a displacement over ``dt`` is within an
-    announcement ``k`` when no joint moved more than ``k·d_max·dt·(1 + rel_tol) + abs_tol``.
-    The check allows the largest of the last ``window`` announcements (a peer's motion follows
-    its announcements with a command's latency).
-    """
-
-    def __init__(
-        self, d_max: float, window: int = 3, rel_tol: float = 0.1, abs_tol: float = 2e-3
-    ) -> None:
-        if not d_max > 0:
-            raise InvalidValueError("d_max", "must be > 0 [rad/s]", d_max)
-        if window < 1:
-            raise InvalidValueError("window", "must be >= 1 announcement", window)
-        self.d_max = float(d_max)
-        self.window = int(window)
-        self.rel_tol = float(rel_tol)
-        self.abs_tol = float(abs_tol)
-        self._peers: dict[str, _Peer] = {}
+    def __init__(self, host: Host) -> None:
+        self.host = host
+        self.settings = host.settings
+        self.reset()
 
     def reset(self) -> None:
-        self._peers.clear()
+        # this arm's recent announcements (newest last); its commands keep the smallest
+        self._announced = deque([FULL_SPEED], maxlen=self.settings.bound_release_ticks + 1)
+        self.holding = False  # settled at the goal, announcing hold_bound
 
-    def _peer(self, peer: str) -> _Peer:
-        if peer not in self._peers:
-            self._peers[peer] = _Peer(deque([FULL_SPEED], maxlen=self.window))
-        return self._peers[peer]
+    @property
+    def announcement(self) -> float:
+        return self._announced[-1]
 
-    def announce(self, peer: str, bound: float) -> None:
-        """Record ``peer``'s newest announcement (a fraction of ``d_max``)."""
-        p = self._peer(peer)
-        bound = check_bound(bound)
-        p.heard = True
-        if p.broken and bound >= FULL_SPEED:
-            p.broken = False  # withdrawn: its next announcement is trusted again
-        p.announced.append(bound)
+    @property
+    def speed_cap(self) -> float:
+        """The smallest of the announcements of the last ``bound_release_ticks`` commands and
+        this one (a withdrawal is heard first)."""
+        return min(self._announced)
 
-    def observe(self, peer: str, t: float, q: ArrayLike) -> None:
-        """Record ``peer``'s joint positions ``q`` at time ``t`` [s] and check the motion since
-        the previous observation against its announcements."""
-        p = self._peer(peer)
-        q = np.asarray(q, dtype=np.float64)
-        if p.q is not None and t > p.t:
-            allowed = max(p.announced) * self.d_max * (t - p.t) * (1.0 + self.rel_tol)
-            if float(np.abs(q - p.q).max()) > allowed + self.abs_tol:
-                if not p.broken:
-                    p.breaches += 1
-                p.broken = True
-        p.q, p.t = q.copy(), float(t)
+    def announce(self, tick: Tick) -> None:
+        """hold_bound from within hold_tolerance of the goal until beyond hold_release, or
+        until a peer breaks the slow game (:meth:`threatened`), else full speed."""
+        s = self.settings
+        e = float(np.linalg.norm(tick.error0))
+        live = self.holding or e <= s.hold_tolerance  # else the threat test cannot matter
+        if e > s.hold_release or (live and self.threatened(tick)):
+            self.holding = False
+        elif e <= s.hold_tolerance:
+            self.holding = True
+        tick.announced = s.hold_bound if self.holding else FULL_SPEED
+        self._announced.append(tick.announced)
+        tick.cap = self.speed_cap
 
-    def bound(self, peer: str) -> float:
-        """The fraction of ``d_max`` to plan ``peer`` against: its newest announcement while it
-        keeps its word, 1 otherwise."""
-        p = self._peers.get(peer)
-        if p is None or p.broken:
-            return FULL_SPEED
-        return p.announced[-1]
-
-    def bounds(self, peers: Iterable[str] | None = None) -> dict[str, float]:
-        """:meth:`bound` of every peer that has announced (of those among ``peers`` if given).
-        A peer never heard from is left out: it takes no part in the announcements (a planner
-        plans it at full speed and treats it as silent)."""
-        ids = self._peers if peers is None else peers
-        return {p: self.bound(p) for p in ids if p in self._peers and self._peers[p].heard}
-
-    def breaches(self, peer: str) -> int:
-        """How often ``peer`` was caught moving faster than it announced."""
-        p = self._peers.get(peer)
-        return 0 if p is None else p.breaches
+    def threatened(self, tick: Tick) -> bool:
+        """Whether a peer at full speed has broken the slow game with this arm near its goal:
+        a participant (it plans against this arm's bound ``k`` and keeps ``V(k·t_safe)`` at its
+        settled margin) brings ``V(k·t_plan)`` below half that margin, a peer that announces
+        nothing below ε, or either comes within ``exact_guard`` of the real geometry."""
+        s, host = self.settings, self.host
+        ids = [p for p in host.pairs if tick.bounds[p] >= FULL_SPEED]
+        if not ids:
+            return False
+        slow = host.evaluate(tick.q, tick.peers, ids, dict.fromkeys(ids, s.hold_bound))
+        half = [0.5 * host.group_margin(host.pairs[p].model_index, s.hold_bound) for p in ids]
+        floor = [h if p in tick.participants else s.epsilon for p, h in zip(ids, half, strict=True)]
+        if np.any(slow.values < np.array(floor)):
+            return True
+        near = {p: tick.peers[p] for p, v in zip(ids, slow.values, strict=True) if v < GUARD_NEAR}
+        return closer_than(host.cell, host.arm_id, tick.q, near, s.exact_guard)

@@ -1,101 +1,117 @@
 """The stall escape of a NeHMO arm: leave a local minimum on the safe set, or yield the goal.
 
+An objective stage (settings ``escape``, ``stall_ticks``, ``escape_ticks``, ``yield_ticks``,
+``stall_progress``, ``stall_margin``, ``escape_seed``; off in the ``paper`` preset). It changes
+only Opt's target; the V rows against every peer's worst case stay.
+
 Opt only ever takes the step closest to the goal, so an arm whose goal lies behind a peer's
 level set stops where the goal direction meets the constraint. :class:`StallEscape` counts calls
 without progress against an active V row and, after ``stall_ticks`` of them, swaps the goal
 error for a target step along a random direction projected onto the tangent space of the
-critical pair's level set (or, at the goal, up V's gradient). It is a part of
-:class:`~nehmo_core.planning.nehmo.NehmoPlanner`, whose state it keeps.
+critical pair's level set (or, at the goal, up V's gradient) for ``escape_ticks`` calls (doubled
+with every escape from the same trap, up to four times).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import Protocol
+import zlib
 
 import numpy as np
 
-from nehmo_core.planning.opt.settings import PlannerSettings
-from nehmo_core.robots.model import RobotModel
+from nehmo_core.planning.opt.pipeline import Host
+from nehmo_core.planning.opt.tick import PeerValues, Tick
 
 __all__ = ["StallEscape"]
 
 
-class _TickPeers(Protocol):
-    """What the escape reads of one tick's constrained peers."""
-
-    @property
-    def values(self) -> np.ndarray:
-        """(k,) V per peer [m]."""
-
-    @property
-    def grads(self) -> Sequence[np.ndarray]:
-        """(n_i,) ∇ₓV per peer."""
-
-
 class StallEscape:
-    """The stall and escape state of a planner, and the rules that change it."""
+    """The stall and escape state of one arm, and the rules that change it."""
 
-    settings: PlannerSettings
-    robot: RobotModel
-    _rng: np.random.Generator
+    name = "escape"
+    flag = "escaping"
 
-    def _clear_stall(self) -> None:
+    def __init__(self, host: Host) -> None:
+        self.arm_id = host.arm_id
+        self.settings = host.settings
+        self.dof = host.robot.dof
+        self.reset()
+
+    def reset(self) -> None:
+        """A new episode: the random stream starts again, the stall state is forgotten."""
+        seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape_seed
+        self.rng = np.random.default_rng(seed)
+        self.clear()
+
+    def clear(self) -> None:
         """Forget the stall and escape state (on reset() and whenever the goal changes; the
-        warm start, Hessian estimate and random stream are kept)."""
-        self._goal: np.ndarray | None = None  # the goal the stall state was gathered toward
-        self._stall = 0  # consecutive calls without progress against an active V row
-        self._escapes = 0  # escapes since the goal error last reached a new low
-        self._escape_left = 0  # calls left in the current escape
-        self._escape_dir = np.zeros(self.robot.dof)
-        self._yielding = False  # the current escape gives way at the goal
-        self._last_error = math.inf
-        self._best_error = math.inf
+        random stream is kept)."""
+        self.goal: np.ndarray | None = None  # the goal the stall state was gathered toward
+        self.stall = 0  # consecutive calls without progress against an active V row
+        self.escapes = 0  # escapes since the goal error last reached a new low
+        self.escape_left = 0  # calls left in the current escape
+        self.direction = np.zeros(self.dof)
+        self.yielding = False  # the current escape gives way at the goal
+        self.last_error = math.inf
+        self.best_error = math.inf
 
-    def _escape_error(self, now: _TickPeers) -> np.ndarray:
-        """The stand-in for ``e₀`` while escaping: minus a full-speed target step, along the
-        escape direction projected onto the tangent space of the critical pair's level set of V
-        (a stalled arm), or straight up V's gradient (an arm yielding its goal)."""
-        g = now.grads[int(np.argmin(now.values))][: self.robot.dof]
-        if self._yielding:
+    def begin(self, tick: Tick) -> None:
+        """A new goal (a controller need not call reset() between goals): a stall or an
+        escape toward the old one says nothing about the new one."""
+        if self.goal is None or not np.array_equal(tick.goal, self.goal):
+            self.clear()
+            self.goal = tick.goal.copy()
+
+    def target(self, tick: Tick, now: PeerValues) -> np.ndarray | None:
+        """While escaping: minus a full-speed target step, along the escape direction
+        projected onto the tangent space of the critical pair's level set of V (a stalled arm),
+        or straight up V's gradient (an arm yielding its goal)."""
+        if self.escape_left <= 0:
+            return None
+        g = now.grads[now.critical][: self.dof]
+        if self.yielding:
             d = g
         else:
-            d = self._escape_dir
+            d = self.direction
             gg = float(g @ g)
             if gg > 1e-12:
                 d = d - (d @ g) / gg * g
         peak = float(np.abs(d).max())
         if peak < 1e-9:
-            return np.zeros(self.robot.dof)
+            return np.zeros(self.dof)
         return -(self.settings.t_plan * self.settings.u_max / peak) * d
 
-    def _track_stall(self, error0: np.ndarray, pressed: bool) -> None:
+    def after(self, tick: Tick, min_constraint: float) -> None:
+        """Count the call, unless another stage steered it (stepping aside is no stall)."""
+        if tick.steered_by in (None, self.name):
+            self.track(tick.error0, min_constraint < self.settings.stall_margin)
+
+    def track(self, error0: np.ndarray, pressed: bool) -> None:
         """Count calls without progress while a V row is active; start an escape (away from
         the goal) or a yield (at the goal) after ``stall_ticks`` of them."""
         s = self.settings
         e = float(np.linalg.norm(error0))
         step = s.t_plan * s.u_max
-        progressed = self._last_error - e > s.stall_progress * step
-        self._last_error = e
-        if self._best_error - e > s.stall_progress * step:
+        progressed = self.last_error - e > s.stall_progress * step
+        self.last_error = e
+        if self.best_error - e > s.stall_progress * step:
             # closer than ever before: a stall from here on is a new trap, not the same one
-            self._best_error = e
-            self._escapes = 0
-        if self._escape_left > 0:
-            self._escape_left -= 1
+            self.best_error = e
+            self.escapes = 0
+        if self.escape_left > 0:
+            self.escape_left -= 1
             return
         if not pressed or (progressed and e >= step):
-            self._stall = 0
+            self.stall = 0
             return
-        self._stall += 1
-        if self._stall < s.stall_ticks:
+        self.stall += 1
+        if self.stall < s.stall_ticks:
             return
-        self._stall = 0
-        self._yielding = e < step
-        if self._yielding:
-            self._escape_left = s.yield_ticks
+        self.stall = 0
+        self.yielding = e < step
+        if self.yielding:
+            self.escape_left = s.yield_ticks
         else:
-            self._escapes += 1
-            self._escape_left = s.escape_ticks * min(2 ** (self._escapes - 1), 4)
-            self._escape_dir = self._rng.standard_normal(self.robot.dof)
+            self.escapes += 1
+            self.escape_left = s.escape_ticks * min(2 ** (self.escapes - 1), 4)
+            self.direction = self.rng.standard_normal(self.dof)
