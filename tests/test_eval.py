@@ -25,7 +25,7 @@ from nehmo_core.planning.models.registry import parse_value_models
 from nehmo_core.planning.models.synthetic import random_value_function
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt.interface import PlanResult, Telemetry
+from nehmo_core.planning.opt.interface import PlanResult, Telemetry, WithoutValues
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenario_files import ScenarioFileError, load_scenario_set, save_scenario_set
@@ -50,7 +50,7 @@ def _scenario_where_naive(outcome: str, time_limit: float = 20.0, limit: int = 4
     raise AssertionError(f"no naive {outcome} in {limit} scenarios")
 
 
-class _Recording:
+class _Recording(WithoutValues):
     """Commands joint 0 at 0.01·(call number + 1) rad/s and records what it observed."""
 
     def __init__(self, arm_id: str) -> None:
@@ -60,7 +60,7 @@ class _Recording:
     def reset(self) -> None:
         self.seen = []
 
-    def plan(self, q_self, peers: Mapping[str, np.ndarray], q_goal) -> PlanResult:
+    def plan(self, q_self, peers: Mapping[str, np.ndarray], q_goal, peer_bounds=None) -> PlanResult:
         self.seen.append(np.array(q_self))
         u = np.zeros(6)
         u[0] = 0.01 * len(self.seen)
@@ -145,7 +145,7 @@ def test_stops_at_the_time_limit() -> None:
     sc = _scenario_where_naive("success")
     hold = {a: _Recording(a) for a in DUAL.arm_ids}
     for p in hold.values():
-        p.plan = lambda q, peers, goal: PlanResult(np.zeros(6), Telemetry(0.0, "hold"))  # type: ignore[method-assign]
+        p.plan = lambda q, peers, goal, bounds=None: PlanResult(np.zeros(6), Telemetry(0.0, "hold"))  # type: ignore[method-assign]
     result = run_episode(DUAL, sc, hold, EpisodeSettings(time_limit=0.4))
     assert result.outcome == "stuck" and result.ticks == 10 and result.end_time == 0.4
     assert result.path_length == 0.0

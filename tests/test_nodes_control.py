@@ -32,6 +32,10 @@ class RecordingPlanner:
     """
 
     arm_id = "ur5_0"
+    announces = False
+    announcement = 1.0
+    peers_unmodelled: tuple[str, ...] = ()
+    epsilon_source = ""
 
     def __init__(self, delay: float = 0.0, error: Exception | None = None) -> None:
         self.delay = delay
@@ -41,7 +45,11 @@ class RecordingPlanner:
         self.release = threading.Event()
 
     def plan(
-        self, q_self: np.ndarray, peers: Mapping[str, np.ndarray], q_goal: np.ndarray
+        self,
+        q_self: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        q_goal: np.ndarray,
+        peer_bounds: Mapping[str, float] | None = None,
     ) -> PlanResult:
         self.calls.append(np.array(q_self))
         self.entered.set()
@@ -51,7 +59,12 @@ class RecordingPlanner:
             raise self.error
         return PlanResult(np.full(6, q_self[0] * 0.01), Telemetry(self.delay, "optimal"))
 
-    def fail_safe(self, q_self: np.ndarray, peers: Mapping[str, np.ndarray]) -> np.ndarray:
+    def fail_safe(
+        self,
+        q_self: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        peer_bounds: Mapping[str, float] | None = None,
+    ) -> np.ndarray:
         return FAIL_SAFE.copy()
 
     def reset(self) -> None:
@@ -560,7 +573,11 @@ def test_a_late_solve_time_comes_with_the_next_planned_command() -> None:
 
     class SlowOnce(RecordingPlanner):
         def plan(
-            self, q_self: np.ndarray, peers: Mapping[str, np.ndarray], q_goal: np.ndarray
+            self,
+            q_self: np.ndarray,
+            peers: Mapping[str, np.ndarray],
+            q_goal: np.ndarray,
+            peer_bounds: Mapping[str, float] | None = None,
         ) -> PlanResult:
             self.delay = 0.06 if not self.calls else 0.0
             return super().plan(q_self, peers, q_goal)
@@ -597,7 +614,12 @@ class SlowFailSafe(RecordingPlanner):
     """A fail-safe held until the test releases it: a tick with a stale peer (policy
     fail_safe) misses."""
 
-    def fail_safe(self, q_self: np.ndarray, peers: Mapping[str, np.ndarray]) -> np.ndarray:
+    def fail_safe(
+        self,
+        q_self: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        peer_bounds: Mapping[str, float] | None = None,
+    ) -> np.ndarray:
         self.entered.set()
         assert self.release.wait(TIMEOUT), "the test never released the fail-safe"
         return FAIL_SAFE.copy()
@@ -630,7 +652,12 @@ class BadFailSafe(RecordingPlanner):
         super().__init__(delay=0.1)
         self.value = value
 
-    def fail_safe(self, q_self: np.ndarray, peers: Mapping[str, np.ndarray]) -> np.ndarray:
+    def fail_safe(
+        self,
+        q_self: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        peer_bounds: Mapping[str, float] | None = None,
+    ) -> np.ndarray:
         return np.full(6, self.value)
 
 
@@ -659,7 +686,11 @@ def test_the_fail_safe_of_a_missed_deadline_is_clipped_and_finite(
 def test_a_non_finite_planned_command_holds(value: float) -> None:
     class NonFinite(RecordingPlanner):
         def plan(
-            self, q_self: np.ndarray, peers: Mapping[str, np.ndarray], q_goal: np.ndarray
+            self,
+            q_self: np.ndarray,
+            peers: Mapping[str, np.ndarray],
+            q_goal: np.ndarray,
+            peer_bounds: Mapping[str, float] | None = None,
         ) -> PlanResult:
             return PlanResult(np.full(6, value), Telemetry(0.0, "optimal"))
 
@@ -713,22 +744,22 @@ def test_the_status_of_a_missed_deadline_reads_back_with_its_solve_times() -> No
 class BoundPlanner(RecordingPlanner):
     """Announces 0.2 and records the peer bounds it is given."""
 
+    announces = True
     announcement = 0.2
 
     def __init__(self) -> None:
         super().__init__()
         self.bounds: list[dict[str, float]] = []
 
-    def plan(  # type: ignore[override]
-        self, q_self: np.ndarray, peers: Mapping[str, np.ndarray], q_goal: np.ndarray, bounds=None
+    def plan(
+        self,
+        q_self: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        q_goal: np.ndarray,
+        peer_bounds: Mapping[str, float] | None = None,
     ) -> PlanResult:
-        self.bounds.append(dict(bounds or {}))
+        self.bounds.append(dict(peer_bounds or {}))
         return super().plan(q_self, peers, q_goal)
-
-    def fail_safe(  # type: ignore[override]
-        self, q_self: np.ndarray, peers: Mapping[str, np.ndarray], bounds=None
-    ) -> np.ndarray:
-        return FAIL_SAFE.copy()
 
 
 def test_a_peers_announced_bound_reaches_the_planner_until_the_peer_moves_faster() -> None:

@@ -29,9 +29,9 @@ from nehmo_core.planning.models.registry import SHIPPED_PAIRS, ModelRegistry, pa
 from nehmo_core.planning.models.synthetic import random_value_function
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt.interface import PlanResult, Telemetry
+from nehmo_core.planning.opt.interface import PlanResult, Telemetry, WithoutValues
 from nehmo_core.planning.opt.settings import PlannerSettings
-from nehmo_core.robots import load_cell
+from nehmo_core.robots import load_cell, load_robot
 from nehmo_core.robots.loader import cell_from_dict
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
 from nehmo_core.sim.cell_sim import CellSimulator
@@ -41,8 +41,9 @@ UR5_PAIR = [("ur5", "ur5", load_cell("dual_ur5").arm("ur5_1").base)]
 
 
 def test_first_joints_turn_about_the_base_z_axis() -> None:
-    assert base_yaw_joint("ur5") == 1.0
-    assert base_yaw_joint("kinova_gen3_6dof") == -1.0  # its joint 1 frame is flipped (rpy π)
+    assert base_yaw_joint(load_robot("ur5")) == 1.0
+    # the Kinova's joint 1 frame is flipped (rpy π)
+    assert base_yaw_joint(load_robot("kinova_gen3_6dof")) == -1.0
 
 
 @pytest.mark.parametrize(
@@ -191,7 +192,7 @@ def test_unmodelled_and_far_peers_are_reported() -> None:
     np.testing.assert_allclose(result.velocity, 0.1)
 
 
-class _Telemetry:
+class _Telemetry(WithoutValues):
     """Wraps a planner and keeps every plan's telemetry."""
 
     def __init__(self, planner: NehmoPlanner) -> None:
@@ -203,8 +204,13 @@ class _Telemetry:
         self.planner.reset()
 
     def plan(
-        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        q_goal: ArrayLike,
+        peer_bounds: Mapping[str, float] | None = None,
     ) -> PlanResult:
+        """The wrapped planner's command; it announces nothing, so it hears no bounds."""
         result = self.planner.plan(q_self, peers, q_goal)
         self.seen.append(result.telemetry)
         return result

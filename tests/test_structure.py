@@ -134,3 +134,19 @@ def test_readme_limitations_are_short() -> None:
     text = (ROOT / "README.md").read_text().split("## Limitations", 1)[1].split("\n## ", 1)[0]
     lines = [line for line in text.strip().splitlines() if line.strip()]
     assert 0 < len(lines) <= 25, f"README Limitations has {len(lines)} lines (at most 25)"
+
+
+def test_ros_nodes_use_planners_through_their_interface() -> None:
+    """No ``hasattr``/``getattr``/``cast`` on a planner in nehmo_ros: the ``Planner`` protocol
+    says what every planner answers."""
+    found = []
+    for path in sorted((ROOT / "nehmo_ros" / "nehmo_ros").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):
+                continue
+            if node.func.id not in ("hasattr", "getattr", "cast") or not node.args:
+                continue
+            subject = ast.unparse(node.args[1 if node.func.id == "cast" else 0])
+            if node.func.id == "hasattr" or "planner" in subject:  # _PLANNER: settings
+                found.append(f"{path.name}:{node.lineno}: {ast.unparse(node)}")
+    assert not found, found

@@ -215,10 +215,10 @@ class ArmPlannerNode(Node):
         planner = build_planner(
             p["planner"], self.cell, arm_id, p["model"], settings, bool(p["allow_unmodelled"])
         )
-        unmodelled = getattr(planner, "peers_unmodelled", ())
+        unmodelled = planner.peers_unmodelled
         if unmodelled:
             self.get_logger().warning(f"peers {list(unmodelled)} are NOT constrained")
-        epsilon_source = getattr(planner, "epsilon_source", "")
+        epsilon_source = planner.epsilon_source
         if epsilon_source:
             self.get_logger().info(epsilon_source)
         warm_up(planner, self.cell, arm_id)

@@ -51,13 +51,12 @@ import math
 import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, cast
 
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.planning.opt.interface import Planner, Telemetry
-from nehmo_core.planning.opt.peer_bounds import FULL_SPEED, PeerBounds
+from nehmo_core.planning.opt.peer_bounds import PeerBounds
 from nehmo_core.robots.model import Cell
 from nehmo_ros.solve_worker import Decision, Observation, SolveWorker, zeros
 from nehmo_ros.state_buffer import StateBuffer, order_joints
@@ -208,7 +207,7 @@ class ArmController:
     @property
     def announcement(self) -> float:
         """The speed bound this arm announces (its planner's; 1 when it announces nothing)."""
-        return float(getattr(self.planner, "announcement", FULL_SPEED))
+        return float(self.planner.announcement)
 
     def observe(self, now: float, stamp_ns: int = 0) -> Observation:
         """Snapshot of the buffers at ``now`` [s] (monotonic) for the current tick."""
@@ -361,7 +360,7 @@ class ArmController:
     @property
     def announces(self) -> bool:
         """Whether this arm's planner takes part in the speed-bound announcements."""
-        return hasattr(self.planner, "announcement")
+        return self.planner.announces
 
     def _fail_safe_velocity(
         self,
@@ -369,12 +368,10 @@ class ArmController:
         peers: Mapping[str, np.ndarray],
         bounds: Mapping[str, float] | None,
     ) -> np.ndarray:
-        fail_safe = getattr(self.planner, "fail_safe", None)
-        if fail_safe is None:  # planners without a value function: holding still is their safe act
+        u = self.planner.fail_safe(q, peers, bounds)
+        if u is None:  # planners without a value function: holding still is their safe act
             return zeros(self.robot.dof)
-        if bounds is not None:
-            return np.asarray(fail_safe(q, peers, bounds), dtype=np.float64)
-        return np.asarray(fail_safe(q, peers), dtype=np.float64)
+        return np.asarray(u, dtype=np.float64)
 
     def _decide(self, obs: Observation) -> Decision:
         if obs.q_self is None:
@@ -401,11 +398,7 @@ class ArmController:
             if self.settings.stale_policy == "hold":
                 return self._hold(status)
             return Decision(fallback, status, fail_safe=True)
-        if bounds is not None:
-            plan = cast(Any, self.planner).plan
-            result = plan(obs.q_self, obs.peers, obs.goal, bounds)
-        else:
-            result = self.planner.plan(obs.q_self, obs.peers, obs.goal)
+        result = self.planner.plan(obs.q_self, obs.peers, obs.goal, bounds)
         t = result.telemetry
         return Decision(result.velocity, t.status, fail_safe=t.fail_safe, telemetry=t)
 

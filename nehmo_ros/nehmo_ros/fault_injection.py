@@ -25,9 +25,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError
+from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.interface import Planner, PlanResult
 
 __all__ = ["FAULT_KINDS", "FaultInjectingPlanner", "FaultSpec", "InjectedFault", "parse_fault"]
@@ -97,24 +99,49 @@ class FaultInjectingPlanner:
         self._active = threading.Event()
         self._release = threading.Event()  # ends a hang early (tests, shutdown)
         if spec.kind == "solver_raise":
-            solver = getattr(planner, "solver", None)
-            if solver is None:
+            if not isinstance(planner, NehmoPlanner):
                 raise InvalidValueError(
                     "fault_injection", "solver_raise needs an Opt planner (nehmo, ...)", str(spec)
                 )
-            planner.solver = _RaisingSolver(solver, self._active)  # type: ignore[attr-defined]
+            planner.solver = _RaisingSolver(planner.solver, self._active)
 
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.inner, name)
+    # -- the rest of the Planner interface, the inner planner's --------------------------------
+    @property
+    def announces(self) -> bool:
+        return self.inner.announces
+
+    @property
+    def announcement(self) -> float:
+        return self.inner.announcement
+
+    @property
+    def peers_unmodelled(self) -> tuple[str, ...]:
+        return self.inner.peers_unmodelled
+
+    @property
+    def epsilon_source(self) -> str:
+        return self.inner.epsilon_source
+
+    def fail_safe(
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        peer_bounds: Mapping[str, float] | None = None,
+    ) -> np.ndarray | None:
+        return self.inner.fail_safe(q_self, peers, peer_bounds)
 
     def release(self) -> None:
         """End a running or future hang."""
         self._release.set()
 
     def plan(
-        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike, *extra: Any
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        q_goal: ArrayLike,
+        peer_bounds: Mapping[str, float] | None = None,
     ) -> PlanResult:
-        """The inner planner's plan (``extra``: e.g. the peers' speed bounds), after the fault."""
+        """The inner planner's plan, after the fault."""
         call, self.calls = self.calls, self.calls + 1
         if call >= self.spec.after:
             self._active.set()
@@ -125,7 +152,7 @@ class FaultInjectingPlanner:
                 self._release.wait(None if math.isinf(self.spec.seconds) else self.spec.seconds)
             elif kind == "slow":
                 time.sleep(self.spec.seconds)
-        return self.inner.plan(q_self, peers, q_goal, *extra)
+        return self.inner.plan(q_self, peers, q_goal, peer_bounds)
 
     def reset(self) -> None:
         self.inner.reset()

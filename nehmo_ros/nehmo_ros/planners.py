@@ -79,7 +79,5 @@ def warm_up(planner: Planner, cell: Cell, arm_id: str, calls: int = 3) -> None:
     goal = q[arm_id] + 0.3
     for _ in range(calls):
         planner.plan(q[arm_id], peers, goal)
-    fail_safe = getattr(planner, "fail_safe", None)
-    if fail_safe is not None:
-        fail_safe(q[arm_id], peers)
+    planner.fail_safe(q[arm_id], peers)
     planner.reset()

@@ -31,7 +31,6 @@ from nehmo_core.eval.planners import build_planners, unmodelled_peers
 from nehmo_core.eval.setups import OPT_KINDS, get_setup, is_centralized, parse_row, row_slug
 from nehmo_core.logs import remove_bag
 from nehmo_core.planning.models.registry import ModelRegistry, ValueModelSource
-from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.interface import Planner
 from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots import load_cell
@@ -145,7 +144,7 @@ def _episode(
     )
     models = {k: registry.described.get(k, []) for k in set(kinds.values()) if k in OPT_KINDS}
     unmodelled = unmodelled_peers(planners)
-    epsilon = {a: p.epsilon_source for a, p in planners.items() if isinstance(p, NehmoPlanner)}
+    epsilon = {a: p.epsilon_source for a, p in planners.items() if p.epsilon_source}
     metadata = {
         "setup": setup.name,
         "row": job.row,

@@ -218,14 +218,16 @@ def _loop(
             announced = {}
             for a in cell.arm_ids:  # the worker thread: plans from tick k, used in tick k + 1
                 planner = planners[a]
-                if isinstance(planner, NehmoPlanner):
-                    peer_bounds = {p: b for p, b in heard.items() if p != a}
-                    result = planner.plan(observed[a], observed, scenario.goal[a], peer_bounds)
-                else:
-                    result = planner.plan(observed[a], observed, scenario.goal[a])
+                peer_bounds = {p: b for p, b in heard.items() if p != a}
+                result = planner.plan(
+                    observed[a],
+                    observed,
+                    scenario.goal[a],
+                    peer_bounds if planner.announces else None,
+                )
                 planned[a] = np.array(result.velocity, dtype=np.float64)
                 t = result.telemetry
-                if isinstance(planner, NehmoPlanner):  # the others announce nothing
+                if planner.announces:
                     announced[a] = t.speed_bound
                 rec.plan_times[a].append(float(t.solve_time))
                 rec.statuses[a][t.status] += 1

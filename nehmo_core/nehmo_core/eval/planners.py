@@ -15,7 +15,6 @@ from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS
 from nehmo_core.planning.factory import centralized_trackers, make_planner
 from nehmo_core.planning.models.registry import OPT_KINDS, SHIPPED_PAIRS, ModelRegistry
 from nehmo_core.planning.models.value_model import PairValueModel
-from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.interface import Planner
 from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
@@ -26,11 +25,7 @@ __all__ = ["build_planners", "unmodelled_peers"]
 
 def unmodelled_peers(planners: Mapping[str, Planner]) -> dict[str, list[str]]:
     """Peers in reach that each Opt planner does not constrain (no pair model fits)."""
-    return {
-        a: list(p.peers_unmodelled)
-        for a, p in planners.items()
-        if isinstance(p, NehmoPlanner) and p.peers_unmodelled
-    }
+    return {a: list(p.peers_unmodelled) for a, p in planners.items() if p.peers_unmodelled}
 
 
 def _missing_models(
@@ -91,7 +86,7 @@ def build_planners(
             peers = tuple(a for a in cell.arm_ids if a != arm_id)
             raise _missing_models(cell, arm_id, kind, peers, models, registry)
         planner = make_planner(kind, cell, arm_id, models, settings)
-        if isinstance(planner, NehmoPlanner) and planner.peers_unmodelled and not allow_unmodelled:
+        if planner.peers_unmodelled and not allow_unmodelled:
             raise _missing_models(cell, arm_id, kind, planner.peers_unmodelled, models, registry)
         out[arm_id] = planner
     if cache is not None:

@@ -38,7 +38,6 @@ from nehmo_core.eval.report import error_notes, json_safe
 from nehmo_core.eval.setups import OPT_KINDS, parse_row, row_slug
 from nehmo_core.logs import remove_bag
 from nehmo_core.planning.models.registry import ModelRegistry, ValueModelSource
-from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.sim.cell_sim import CellSimulator
 
@@ -109,9 +108,7 @@ def _episode(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult,
             k: registry.described.get(k, []) for k in set(kinds.values()) if k in OPT_KINDS
         },
         "unmodelled_peers": unmodelled_peers(planners),
-        "epsilon": {
-            a: p.epsilon_source for a, p in planners.items() if isinstance(p, NehmoPlanner)
-        },
+        "epsilon": {a: p.epsilon_source for a, p in planners.items() if p.epsilon_source},
     }
     log_path = _log_path(config, row, task)
     remove_bag(log_path)

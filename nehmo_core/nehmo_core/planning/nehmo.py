@@ -60,6 +60,8 @@ __all__ = ["NehmoPlanner"]
 class NehmoPlanner:
     """NeHMO (or Opt + any pair value model) for arm ``arm_id`` of ``cell``."""
 
+    announces = True  # it plans against its peers' announced bounds and announces its own
+
     def __init__(
         self,
         cell: Cell,

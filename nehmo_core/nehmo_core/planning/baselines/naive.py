@@ -22,14 +22,20 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.planning.opt.interface import PlanResult, Telemetry, goal_error, one_joint_vector
+from nehmo_core.planning.opt.interface import (
+    PlanResult,
+    Telemetry,
+    WithoutValues,
+    goal_error,
+    one_joint_vector,
+)
 from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
 __all__ = ["NaivePlanner", "TimedTrajectory", "TrajectoryTracker", "retime"]
 
 
-class NaivePlanner:
+class NaivePlanner(WithoutValues):
     """Straight toward the goal, clamped to ``ū`` (``reckless=True`` only relabels it)."""
 
     def __init__(
@@ -49,8 +55,13 @@ class NaivePlanner:
         """Stateless."""
 
     def plan(
-        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        q_goal: ArrayLike,
+        peer_bounds: Mapping[str, float] | None = None,
     ) -> PlanResult:
+        """One tick (``peer_bounds`` is ignored: this planner announces nothing)."""
         start = time.perf_counter()
         q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
         goal = one_joint_vector(self.robot.check_q(q_goal, "q_goal"), "q_goal")
@@ -86,7 +97,7 @@ def retime(waypoints: Mapping[str, np.ndarray], speed: float) -> TimedTrajectory
     return TimedTrajectory(times, {a: np.asarray(waypoints[a]) for a in arms})
 
 
-class TrajectoryTracker:
+class TrajectoryTracker(WithoutValues):
     """Per-arm planner interface over a centralized :class:`TimedTrajectory`."""
 
     def __init__(
@@ -114,8 +125,13 @@ class TrajectoryTracker:
         self._last = np.zeros(self.robot.dof)
 
     def plan(
-        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        q_goal: ArrayLike,
+        peer_bounds: Mapping[str, float] | None = None,
     ) -> PlanResult:
+        """One tick (``peer_bounds`` is ignored: this planner announces nothing)."""
         start = time.perf_counter()
         q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
         # One tick of latency: this command acts during the next tick, while the previous one

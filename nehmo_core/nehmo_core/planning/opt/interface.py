@@ -21,7 +21,15 @@ from numpy.typing import ArrayLike
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.robots.model import Cell, RobotModel
 
-__all__ = ["PlanResult", "Planner", "Telemetry", "check_peers", "goal_error", "one_joint_vector"]
+__all__ = [
+    "PlanResult",
+    "Planner",
+    "Telemetry",
+    "WithoutValues",
+    "check_peers",
+    "goal_error",
+    "one_joint_vector",
+]
 
 
 @dataclass(frozen=True)
@@ -61,15 +69,66 @@ class PlanResult:
 
 
 class Planner(Protocol):
-    """One arm's planner: ``plan`` every tick, ``reset`` between episodes."""
+    """One arm's planner, as the batch runner and the ROS control loop use it: ``plan`` every
+    tick, ``fail_safe`` ahead of a solve that may run late, ``reset`` between episodes.
 
-    arm_id: str
+    ``announces``: the planner takes part in the speed-bound announcements (it plans against the
+    bounds its peers announce, given as ``peer_bounds``, and announces its own, ``announcement``
+    after each ``plan``). ``fail_safe`` is None for a planner without a value function (holding
+    still is then its safe act). ``peers_unmodelled``: peers in reach it does not constrain;
+    ``epsilon_source``: where its safety margin comes from ('' without one).
+    """
+
+    @property
+    def arm_id(self) -> str: ...
+
+    @property
+    def announces(self) -> bool: ...
+
+    @property
+    def announcement(self) -> float: ...
+
+    @property
+    def peers_unmodelled(self) -> tuple[str, ...]: ...
+
+    @property
+    def epsilon_source(self) -> str: ...
 
     def plan(
-        self, q_self: ArrayLike, peers: Mapping[str, ArrayLike], q_goal: ArrayLike
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        q_goal: ArrayLike,
+        peer_bounds: Mapping[str, float] | None = None,
     ) -> PlanResult: ...
 
+    def fail_safe(
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        peer_bounds: Mapping[str, float] | None = None,
+    ) -> np.ndarray | None: ...
+
     def reset(self) -> None: ...
+
+
+class WithoutValues:
+    """What a planner without a value function answers to the parts of :class:`Planner` it has
+    no use for: it announces nothing, has no fail-safe and no margin, leaves no peer out."""
+
+    announces = False
+    announcement = 1.0
+    peers_unmodelled: tuple[str, ...] = ()
+    epsilon_source = ""
+
+    def fail_safe(
+        self,
+        q_self: ArrayLike,
+        peers: Mapping[str, ArrayLike],
+        peer_bounds: Mapping[str, float] | None = None,
+    ) -> np.ndarray | None:
+        """None: holding still is the safe act of a planner without a value function."""
+        return None
 
 
 def goal_error(q: np.ndarray, goal: np.ndarray, robot: RobotModel, wrap: bool) -> np.ndarray:
