@@ -931,13 +931,13 @@ def test_the_fail_safe_and_the_solve_of_one_state_share_one_evaluation(model) ->
     )
     q1, q2, goal = _near_contact(model, 8, 1)[0]
     evaluations = []
-    evaluate = planner.evaluate
+    evaluate = planner.opt.evaluate
 
     def counted(*args):  # type: ignore[no-untyped-def]
         evaluations.append(args)
         return evaluate(*args)
 
-    planner.evaluate = counted  # type: ignore[method-assign]
+    planner.opt.evaluate = counted  # type: ignore[method-assign]
     planner.fail_safe(q1, {PEER: q2})
     first = planner.plan(q1, {PEER: q2}, goal)
     assert len(evaluations) == 1

@@ -24,19 +24,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from nehmo_core.errors import InvalidValueError
-from nehmo_core.planning.models.margins import CertifiedMargins
-from nehmo_core.planning.models.pair_frame import constrained_pairs
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.opt.fail_safe import HjiFailSafe
 from nehmo_core.planning.opt.interface import (
     PlanResult,
     Telemetry,
-    check_peers,
-    goal_error,
     one_joint_vector,
 )
-from nehmo_core.planning.opt.peer_bounds import FULL_SPEED, check_bound
+from nehmo_core.planning.opt.pairs import PeerPairs
+from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import (
     Announcer,
     CommandFilter,
@@ -45,12 +41,10 @@ from nehmo_core.planning.opt.pipeline import (
     RowProvider,
     Stage,
 )
-from nehmo_core.planning.opt.problem import Constraints, LinearRows, OptProblem, project_step
-from nehmo_core.planning.opt.problem import worst_case_disturbance as worst_case
+from nehmo_core.planning.opt.problem import LinearRows, OptProblem, project_step
 from nehmo_core.planning.opt.settings import PlannerSettings
-from nehmo_core.planning.opt.tick import PeerValues, Tick
-from nehmo_core.planning.solvers.base import OptSolver, SqpSolver, make_solver
-from nehmo_core.planning.solvers.native import loop
+from nehmo_core.planning.opt.tick import PeerValues, Tick, peer_vectors, read_tick
+from nehmo_core.planning.solvers.base import OptSolver, make_solver, ready_solver
 from nehmo_core.planning.stages import build_stages
 from nehmo_core.robots.model import Cell
 
@@ -75,34 +69,13 @@ class NehmoPlanner:
         self.robot = cell.arm(arm_id).robot
         self.settings = settings or PlannerSettings()
         self.models = list(models)
-        for model in self.models:
-            if not self.settings.t_safe <= model.horizon + 1e-9:
-                raise InvalidValueError(
-                    "t_safe",
-                    f"must be <= the horizon of model {model.name!r} ({model.horizon})",
-                    self.settings.t_safe,
-                )
-        self.solver = solver or make_solver(self.settings)
-        if isinstance(self.solver, SqpSolver) and self.solver.native:
-            # build (first use in this cache) and load the C loop and models now, not in a tick
-            c_loop = loop()
-            if c_loop is not None:
-                for model in self.models:
-                    c_loop.model(model)
-        self.pairs, self.peers_skipped, self.peers_unmodelled = constrained_pairs(
-            cell, arm_id, [m.geometry for m in self.models], self.settings.reach_margin
-        )
-        s = self.settings
-        self.margins = CertifiedMargins(
-            self.models,
-            [m.model_index for m in self.pairs.values()],
-            s.epsilon,
-            s.settled_epsilon,
-            s.t_safe,
-            s.certified_epsilon,
-        )
+        self.solver = ready_solver(solver or make_solver(self.settings), self.models, self.settings)
+        self.opt = PeerPairs(cell, arm_id, self.models, self.settings)
+        self.pairs, self.margins = self.opt.pairs, self.opt.margins
+        self.settings = self.opt.settings  # ε raised by the certified margins
+        self.peers_skipped, self.peers_unmodelled = self.opt.skipped, self.opt.unmodelled
         self.epsilon_source = self.margins.source
-        self.settings = s.replace(epsilon=self.margins.epsilon)
+        s = self.settings
         staged = build_stages(self)
         self.stages: tuple[Stage, ...] = staged.all
         self._announcer: Announcer | None = staged.announcer
@@ -123,7 +96,7 @@ class NehmoPlanner:
 
     def reset(self) -> None:
         """Forget everything of the last episode (stages included)."""
-        self._last_current: tuple[object, PeerValues] | None = None  # see current()
+        self.opt.forget()
         # the last solution, the next solve's start; None: start at the naive step (at reset, and
         # after a fail-safe step, a corner of the box that says nothing about the next solution)
         self._warm: np.ndarray | None = None
@@ -149,9 +122,38 @@ class NehmoPlanner:
         return sum(f.shortened for f in self._filters)
 
     def group_margin(self, model_index: int, bound: float) -> float:
-        """The margin [m] of model ``model_index``'s rows against peers planned at ``bound`` of
-        full speed (:meth:`~nehmo_core.planning.models.margins.CertifiedMargins.group`)."""
-        return self.margins.group(model_index, bound)
+        """The margin [m] rows of model ``model_index`` keep against peers at ``bound``."""
+        return self.opt.group_margin(model_index, bound)
+
+    def evaluate(
+        self,
+        q: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        ids: list[str],
+        bounds: Mapping[str, float],
+    ) -> PeerValues:
+        """:meth:`PeerPairs.evaluate` (uncached)."""
+        return self.opt.evaluate(q, peers, ids, bounds)
+
+    def current(
+        self,
+        q: np.ndarray,
+        peers: Mapping[str, np.ndarray],
+        bounds: Mapping[str, float] | None = None,
+        only_known: bool = False,
+    ) -> PeerValues:
+        """:meth:`PeerPairs.current` (the last evaluation is kept)."""
+        return self.opt.current(q, peers, bounds, only_known)
+
+    def problem(
+        self,
+        target: np.ndarray,
+        now: PeerValues,
+        rows: LinearRows | None = None,
+        cap: float = FULL_SPEED,
+    ) -> OptProblem:
+        """:meth:`PeerPairs.problem`: Opt toward ``target`` (a stand-in for ``e₀``)."""
+        return self.opt.problem(target, now, rows, cap)
 
     def rows(self, q: np.ndarray) -> LinearRows | None:
         """The row providers' rows at ``q`` (None without a row provider)."""
@@ -168,79 +170,6 @@ class NehmoPlanner:
             return u
         t = self.settings.t_plan
         return project_step(t * u, rows, t * self.settings.u_max) / t
-
-    def peer_bounds(self, peer_bounds: Mapping[str, float] | None) -> dict[str, float]:
-        """Each constrained peer's bound (1 unless given)."""
-        given = peer_bounds or {}
-        return {
-            p: check_bound(given[p], f"peer_bounds[{p!r}]") if p in given else FULL_SPEED
-            for p in self.pairs
-        }
-
-    def current(
-        self,
-        q: np.ndarray,
-        peers: Mapping[str, np.ndarray],
-        bounds: Mapping[str, float] | None = None,
-        only_known: bool = False,
-    ) -> PeerValues:
-        """The constrained peers' pair states, ``V`` and ``∇V`` at ``τ = b·t_plan`` now (``b``
-        the peer's speed bound). The last answer is kept: a node asks for the fail-safe ahead of
-        each solve from the same state, and the solve then reuses its evaluation."""
-        ids = [p for p in self.pairs if p in peers] if only_known else list(self.pairs)
-        if bounds is None:
-            bounds = self.peer_bounds(None)
-        key = (q.tobytes(), tuple((p, peers[p].tobytes(), bounds[p]) for p in ids))
-        if self._last_current is not None and self._last_current[0] == key:
-            return self._last_current[1]
-        now = self.evaluate(q, peers, ids, bounds)
-        self._last_current = (key, now)
-        return now
-
-    def evaluate(
-        self,
-        q: np.ndarray,
-        peers: Mapping[str, np.ndarray],
-        ids: list[str],
-        bounds: Mapping[str, float],
-    ) -> PeerValues:
-        """``V`` and ``∇V`` at ``τ = b·t_plan`` of the pairs with peers ``ids`` (uncached)."""
-        index = [self.pairs[p].model_index for p in ids]
-        states = [self.pairs[p].state(q, peers[p]) for p in ids]
-        values = np.empty(len(ids))
-        grads: list[np.ndarray] = [np.empty(0)] * len(ids)
-        now = PeerValues(ids, index, states, values, grads, np.array([bounds[p] for p in ids]))
-        for m, b, members in now.groups:
-            v, g = self.models[m].evaluate(
-                b * self.settings.t_plan, np.array([states[i] for i in members])
-            )
-            for k, i in enumerate(members):
-                values[i], grads[i] = v[k], g[k]
-        return now
-
-    def problem(
-        self,
-        target: np.ndarray,
-        now: PeerValues,
-        rows: LinearRows | None = None,
-        cap: float = FULL_SPEED,
-    ) -> OptProblem:
-        """Problem Opt toward ``target`` (a stand-in for ``e₀``): the V rows of every
-        constrained peer at its predicted worst case, ``rows`` after them."""
-        s, n1 = self.settings, self.robot.dof
-        groups, horizons, margins = [], [], []
-        for m, b, members in now.groups:
-            predicted = np.array([now.states[i] for i in members])
-            n12 = n1 + self.models[m].n2  # a conditioned model's r (after q²) never moves
-            peer_grads = np.array([now.grads[i][n1:n12] for i in members])
-            predicted[:, n1:n12] += s.t_plan * worst_case(peer_grads, b * s.d_max)
-            groups.append((m, predicted))
-            horizons.append(b * s.t_safe)
-            margins.append(self.group_margin(m, b))
-        constraints = Constraints(
-            self.models, groups, s.t_safe, s.epsilon, rows, tuple(horizons), tuple(margins)
-        )
-        return OptProblem(target, s.t_plan * s.u_max * cap, s.t_plan, constraints)
 
     def fail_safe_command(
         self, now: PeerValues, rows: LinearRows | None = None, cap: float = FULL_SPEED
@@ -265,10 +194,10 @@ class NehmoPlanner:
         ``peer_bounds`` and the arm's own speed cap as in :meth:`plan`.
         """
         q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
-        others = _peer_vectors(self.cell, self.arm_id, peers)
+        others = peer_vectors(self.cell, self.arm_id, peers)
         if not any(p in others for p in self.pairs):
             return np.zeros(self.robot.dof)
-        now = self.current(q, others, self.peer_bounds(peer_bounds), only_known=True)
+        now = self.current(q, others, self.opt.bounds(peer_bounds), only_known=True)
         return self.fail_safe_command(now, self.rows(q), self.speed_cap)
 
     # -- one tick -----------------------------------------------------------------------------
@@ -288,7 +217,7 @@ class NehmoPlanner:
         """
         start = time.perf_counter()
         deadline = start + self.settings.deadline
-        tick = self._tick(q_self, peers, q_goal, peer_bounds)
+        tick = read_tick(self, q_self, peers, q_goal, self.opt.bounds(peer_bounds), peer_bounds)
         for objective in self._objectives:
             objective.begin(tick)
         if self._announcer is not None:
@@ -344,31 +273,6 @@ class NehmoPlanner:
         )
         return PlanResult(u, telemetry)
 
-    def _tick(
-        self,
-        q_self: ArrayLike,
-        peers: Mapping[str, ArrayLike],
-        q_goal: ArrayLike,
-        peer_bounds: Mapping[str, float] | None,
-    ) -> Tick:
-        """The call's inputs, checked."""
-        q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
-        goal = one_joint_vector(self.robot.check_q(q_goal, "q_goal"), "q_goal")
-        others = _peer_vectors(self.cell, self.arm_id, peers)
-        missing = [p for p in self.pairs if p not in others]
-        if missing:
-            raise InvalidValueError(
-                "peers", f"must include every constrained arm {missing}", list(others)
-            )
-        return Tick(
-            q=q,
-            goal=goal,
-            error0=goal_error(q, goal, self.robot, self.settings.wrap_goal),
-            peers=others,
-            bounds=self.peer_bounds(peer_bounds),
-            participants=frozenset(p for p in peer_bounds or {} if p in self.pairs),
-        )
-
     def _target(self, tick: Tick, now: PeerValues) -> np.ndarray:
         """Opt's target this tick: the first objective stage's stand-in for ``e₀`` (every
         objective sees every tick), else ``e₀``."""
@@ -388,9 +292,3 @@ class NehmoPlanner:
             return result, result.status
         except Exception as exc:  # any solver crash must end in the fail-safe
             return None, f"failed ({type(exc).__name__})"
-
-
-def _peer_vectors(cell: Cell, arm_id: str, peers: Mapping[str, ArrayLike]) -> dict[str, np.ndarray]:
-    """:func:`check_peers`, with one joint vector per peer (no batches)."""
-    checked = check_peers(cell, arm_id, peers)
-    return {p: one_joint_vector(q, f"peers[{p!r}]") for p, q in checked.items()}

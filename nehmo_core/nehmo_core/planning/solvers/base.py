@@ -2,17 +2,21 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
+from nehmo_core.errors import InvalidValueError
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.opt.problem import OptProblem
 from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.planning.solvers.ipopt import IpoptSolver
+from nehmo_core.planning.solvers.native import loop
 from nehmo_core.planning.solvers.sqp import SolveResult, solve_sqp
 
-__all__ = ["OptSolver", "SqpSolver", "make_solver"]
+__all__ = ["OptSolver", "SqpSolver", "make_solver", "ready_solver"]
 
 
 class OptSolver(Protocol):
@@ -63,3 +67,23 @@ def make_solver(settings: PlannerSettings) -> OptSolver:
     return SqpSolver(
         settings.sqp_tol, settings.sqp_max_iter, settings.sqp_screen, settings.sqp_native
     )
+
+
+def ready_solver(
+    solver: OptSolver, models: Sequence[PairValueModel], settings: PlannerSettings
+) -> OptSolver:
+    """``solver`` for ``models``, checked (``t_safe`` within every model's horizon) and made
+    ready: the C loop built (first use in this cache) and the models loaded now, not in a tick."""
+    for model in models:
+        if not settings.t_safe <= model.horizon + 1e-9:
+            raise InvalidValueError(
+                "t_safe",
+                f"must be <= the horizon of model {model.name!r} ({model.horizon})",
+                settings.t_safe,
+            )
+    if isinstance(solver, SqpSolver) and solver.native:
+        c_loop = loop()
+        if c_loop is not None:
+            for model in models:
+                c_loop.model(model)
+    return solver
