@@ -19,7 +19,6 @@ from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenarios import (
     DRAW_ORDERS,
     PAPER_SEED,
-    SAMPLING_RANGES,
     SAMPLING_REVISION,
     Scenario,
     draw_order,
@@ -43,7 +42,8 @@ def test_ur5_samples_in_converted_ranges() -> None:
     ur5 = load_robot("ur5")
     rng = np.random.default_rng(0)
     q = np.array([sample_configuration(ur5, rng) for _ in range(500)])
-    box = SAMPLING_RANGES["ur5"]
+    box = sampling_box(ur5)
+    np.testing.assert_array_equal(box, np.array(ur5.facts.sampling_ranges))
     q1 = _q1_unwrapped(q[:, 0])
     assert q1.min() >= -5.0 - 1e-9 and q1.max() <= -1.5 + 1e-9
     assert q[:, 0].min() >= -np.pi and q[:, 0].max() <= np.pi  # wrapped
@@ -79,7 +79,7 @@ def test_a_cell_configuration_is_one_draw_in_the_cells_joint_order() -> None:
     want = {a: np.zeros(6) for a in cell.arm_ids}
     for k, token in enumerate(DRAW_ORDERS["dual_ur5"].split()):
         arm_number, joint = (int(x) - 1 for x in token.split("."))
-        lo, hi = SAMPLING_RANGES["ur5"][joint]
+        lo, hi = sampling_box(load_robot("ur5"))[joint]
         want[cell.arm_ids[arm_number]][joint] = lo + (hi - lo) * u[k]
     for arm in cell.arms:
         np.testing.assert_allclose(got[arm.arm_id], arm.robot.wrap(want[arm.arm_id]), atol=1e-12)

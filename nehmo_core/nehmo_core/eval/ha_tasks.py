@@ -1,8 +1,9 @@
 """Ha et al.'s multi-arm benchmark tasks (CoRL 2020) as cells and scenarios.
 
 A task file (JSON) holds, per arm, a base pose ``[[x, y, z], [qx, qy, qz, qw]]`` [m] in the world
-frame, a start and a goal joint vector of a UR5 (URDF joint order) and the goal pose of their
-end effector (flange plus gripper). :func:`load_task` turns one into a :class:`HaTask`: a
+frame, a start and a goal joint vector of a UR5 (URDF joint order; the registry's
+:data:`~nehmo_core.robots.registry.HA_BENCHMARK_ROBOT`) and the goal pose of their end effector
+(flange plus gripper). :func:`load_task` turns one into a :class:`HaTask`: a
 :class:`~nehmo_core.robots.model.Cell` with one UR5 per base pose (``ur5_0`` …) and a
 :class:`~nehmo_core.sim.scenarios.Scenario`.
 
@@ -31,6 +32,7 @@ from nehmo_core.errors import InvalidValueError, ModelFileError
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.robots.loader import load_robot
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
+from nehmo_core.robots.registry import HA_BENCHMARK_ROBOT
 from nehmo_core.sim.scenarios import Scenario
 
 __all__ = [
@@ -109,13 +111,13 @@ def load_task(path: str | Path) -> HaTask:
             "must list the same (non-zero) number of arms",
             [len(bases), len(starts), len(goals)],
         )
-    ur5 = load_robot("ur5")
+    robot = load_robot(HA_BENCHMARK_ROBOT)
     arms, start, goal = [], {}, {}
     for i, (base, q0, q1) in enumerate(zip(bases, starts, goals, strict=True)):
-        arm_id = f"ur5_{i}"
-        arms.append(ArmSpec(arm_id, ur5, _base_pose(base, path, i)))
-        start[arm_id] = ur5.check_q(q0, f"{path.name}: start_config[{i}]")
-        goal[arm_id] = ur5.check_q(q1, f"{path.name}: goal_config[{i}]")
+        arm_id = f"{robot.name}_{i}"
+        arms.append(ArmSpec(arm_id, robot, _base_pose(base, path, i)))
+        start[arm_id] = robot.check_q(q0, f"{path.name}: start_config[{i}]")
+        goal[arm_id] = robot.check_q(q1, f"{path.name}: goal_config[{i}]")
     targets = tuple(_tool_pose(t) for t in data.get("target_eff_poses") or ())
     task_id = str(data.get("id", path.stem))
     difficulty = data.get("difficulty")

@@ -21,30 +21,21 @@ from tqdm import tqdm
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.robots import registry
 from nehmo_core.robots.loader import load_cell, load_robot
 from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel
 
-PAIRS: dict[str, tuple[str, str, str]] = {
-    # pair name: (cell, arm 1, arm 2). Arm 1 sits at the origin, arm 2 facing it, 0.6 m away
-    # (0.849 m for ``ur5_ur5_diag``, the diagonal neighbours of the five-UR5 cell; 1.2 m for
-    # ``ur5_ur5_opposite``, the outer arms of the three- and five-UR5 cells facing each other).
-    "ur5_ur5": ("dual_ur5", "ur5_0", "ur5_1"),
-    "ur5_ur5_diag": ("diagonal_ur5", "ur5_0", "ur5_1"),
-    "ur5_ur5_opposite": ("opposite_ur5", "ur5_0", "ur5_1"),
-    "ur5_kinova": ("ur5_kinova", "ur5_0", "kinova_0"),
-}
-CONDITIONED_PAIRS: dict[str, tuple[str, str]] = {
-    # pair name: (robot 1, robot 2). Arm 1 at the origin, arm 2 at (r, 0, 0) facing it, for any
-    # base distance r in BASE_RANGE: the pose-conditioned models (one for every layout).
-    "ur5_ur5_any": ("ur5", "ur5"),
-    "ur5_kinova_any": ("ur5", "kinova_gen3_6dof"),
-}
-SWAPPED_PAIRS: dict[str, str] = {
-    # arm-pair system name: the pair whose learned distance it reuses with the arms' roles
-    # exchanged (its arm 1 is the pair's arm 2): the Kinova's side of the UR5-Kinova pairs.
-    "kinova_ur5": "ur5_kinova",
-    "kinova_ur5_any": "ur5_kinova_any",
-}
+PAIRS: dict[str, tuple[str, str, str]] = registry.FIXED_PAIRS
+"""Pair name → (cell, arm 1, arm 2) (:data:`~nehmo_core.robots.registry.ARM_PAIRS`). Arm 1 sits
+at the origin, arm 2 facing it, 0.6 m away (0.849 m for ``ur5_ur5_diag``, the diagonal
+neighbours of the five-UR5 cell; 1.2 m for ``ur5_ur5_opposite``, the outer arms of the three-
+and five-UR5 cells facing each other)."""
+CONDITIONED_PAIRS: dict[str, tuple[str, str]] = registry.CONDITIONED_PAIRS
+"""Pair name → (robot 1, robot 2). Arm 1 at the origin, arm 2 at (r, 0, 0) facing it, for any
+base distance r in BASE_RANGE: the pose-conditioned models (one for every layout)."""
+SWAPPED_PAIRS: dict[str, str] = registry.SWAPPED_PAIRS
+"""Arm-pair system name → the pair whose learned distance it reuses with the arms' roles
+exchanged (its arm 1 is the pair's arm 2): the Kinova's side of the UR5-Kinova pairs."""
 BASE_RANGE = (0.25, 1.7)
 """Base distances [m] the conditioned models are trained on (Ha et al.'s layouts: 0.31-1.60)."""
 CUTOFF = 1.0
@@ -140,7 +131,7 @@ def _init_worker(pair: str) -> None:
     if pair in CONDITIONED_PAIRS:
         from nehmo_core.planning.models.pair_frame import base_yaw_joint
 
-        signs = [base_yaw_joint(cell.arm(x).robot.name) for x in (a, b)]
+        signs = [base_yaw_joint(cell.arm(x).robot) for x in (a, b)]
         if signs[0] is None or signs[1] is None:
             raise InvalidValueError(
                 "pair", "a conditioned pair needs arms whose first joint is a base yaw", pair

@@ -30,47 +30,17 @@ from torch import nn
 from nehmo_core.errors import ModelFileError, UnknownNameError
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.robots.loader import load_robot
-from nehmo_core.robots.model import Pose
+from nehmo_core.robots.model import Pose, RobotModel
+from nehmo_core.robots.registry import (
+    OPTIONAL,
+    ROBOT_NAMES,
+    SHIPPED,
+    distance_pairs,
+    robot_facts,
+)
 
 FORMAT_VERSION = 1
 MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
-
-# Keypoints per robot: link-frame origins, and segments between two links' origins with the
-# number of interior points to place on each.
-KEYPOINTS: dict[str, dict[str, Any]] = {
-    "ur5": {
-        "origins": [
-            "base_link",
-            "shoulder_link",
-            "upper_arm_link",
-            "forearm_link",
-            "wrist_1_link",
-            "wrist_2_link",
-            "wrist_3_link",
-            "ee_link",
-        ],
-        "segments": [("upper_arm_link", "forearm_link", 3), ("forearm_link", "wrist_1_link", 3)],
-    },
-    "kinova_gen3_6dof": {
-        "origins": [
-            "base_link",
-            "shoulder_link",
-            "bicep_link",
-            "forearm_link",
-            "spherical_wrist_1_link",
-            "spherical_wrist_2_link",
-            "bracelet_link",
-            "end_effector_link",
-        ],
-        "segments": [
-            ("shoulder_link", "bicep_link", 1),
-            ("bicep_link", "forearm_link", 3),
-            ("forearm_link", "spherical_wrist_1_link", 2),
-            ("spherical_wrist_1_link", "spherical_wrist_2_link", 1),
-            ("spherical_wrist_2_link", "bracelet_link", 1),
-        ],
-    },
-}
 
 
 @dataclass(frozen=True)
@@ -91,14 +61,17 @@ class DistanceModelConfig:
 
 
 class _Keypoints(nn.Module):
-    def __init__(self, robot_name: str, base: Pose) -> None:
+    """The robot's keypoints (``robot.facts``): link-frame origins, and segments between two
+    links' origins with the number of interior points to place on each."""
+
+    def __init__(self, robot: RobotModel, base: Pose) -> None:
         super().__init__()
-        if robot_name not in KEYPOINTS:
-            raise UnknownNameError("keypoint set", robot_name, KEYPOINTS)
-        spec = KEYPOINTS[robot_name]
-        self.kin = ArmKinematics(load_robot(robot_name), base)
-        self.origins: list[str] = list(spec["origins"])
-        self.segments: list[tuple[str, str, int]] = [tuple(s) for s in spec["segments"]]
+        if not robot.facts.keypoints:
+            known = [n for n in ROBOT_NAMES if robot_facts(n).keypoints]
+            raise UnknownNameError("keypoint set", robot.name, known)
+        self.kin = ArmKinematics(robot, base)
+        self.origins: list[str] = list(robot.facts.keypoints)
+        self.segments: list[tuple[str, str, int]] = list(robot.facts.keypoint_segments)
         self.count = len(self.origins) + sum(s[2] for s in self.segments)
 
     def forward(self, q: torch.Tensor) -> torch.Tensor:
@@ -125,8 +98,8 @@ class PairDistanceModel(nn.Module):
         self.r1 = load_robot(config.robot1)
         self.r2 = load_robot(config.robot2)
         self.n1, self.n2 = self.r1.dof, self.r2.dof
-        self.kp1 = _Keypoints(config.robot1, Pose())
-        self.kp2 = _Keypoints(config.robot2, Pose(config.base2_xyz, config.base2_rpy))
+        self.kp1 = _Keypoints(self.r1, Pose())
+        self.kp2 = _Keypoints(self.r2, Pose(config.base2_xyz, config.base2_rpy))
         self.n_cond = 1 if config.conditioned else 0
         n_feat = self.kp1.count * self.kp2.count + len(config.softmin_betas) + self.n_cond
         self.register_buffer("feat_mean", torch.zeros(n_feat, dtype=torch.float64))
@@ -248,19 +221,16 @@ def distance_model_path(pair: str) -> Path:
     return MODELS_DIR / f"distance_{pair}.safetensors"
 
 
-OPTIONAL_DISTANCE_MODELS = ("ur5_kinova_any",)
+OPTIONAL_DISTANCE_MODELS = distance_pairs(OPTIONAL)
 """Pairs whose code path exists but whose weights this repository does not ship: once
 ``nehmo distance train --pair <pair>`` has written ``models/distance_<pair>.safetensors`` (and its
 card), :func:`load_distance_model` loads it and it counts as shipped."""
 SHIPPED_DISTANCE_MODELS = (
-    "ur5_ur5",
-    "ur5_ur5_diag",
-    "ur5_ur5_opposite",
-    "ur5_kinova",
-    "ur5_ur5_any",
+    *distance_pairs(SHIPPED),
     *(p for p in OPTIONAL_DISTANCE_MODELS if distance_model_path(p).exists()),
 )
-"""Pairs whose learned distance is in ``models/`` (the optional ones as found at import)."""
+"""Pairs whose learned distance is in ``models/`` (the optional ones as found at import; both
+lists come from :data:`~nehmo_core.robots.registry.ARM_PAIRS`)."""
 DISTANCE_MODELS = tuple(dict.fromkeys([*SHIPPED_DISTANCE_MODELS, *OPTIONAL_DISTANCE_MODELS]))
 """Every pair :func:`load_distance_model` knows by name."""
 

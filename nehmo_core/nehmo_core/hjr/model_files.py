@@ -24,6 +24,7 @@ from nehmo_core.errors import (
 from nehmo_core.hjr.networks import ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import HJISystem, make_system
 from nehmo_core.hjr.train_settings import Schedule, TrainSettings
+from nehmo_core.robots.registry import OPTIONAL, SHIPPED, value_variants
 
 __all__ = [
     "CHECKPOINT",
@@ -132,28 +133,21 @@ def _value_file(name: str, variant: str) -> Path:
     return MODELS_DIR / f"value_{name}_{variant.replace('+', '_')}.safetensors"
 
 
-OPTIONAL_VALUE_FUNCTIONS: dict[str, tuple[str, ...]] = {
-    "ur5_kinova_any": ("bc+sym",),
-    "kinova_ur5_any": ("bc+sym",),
-}
+OPTIONAL_VALUE_FUNCTIONS: dict[str, tuple[str, ...]] = value_variants(OPTIONAL)
 """Value functions (system: variants) whose code path exists but whose weights this repository
 does not ship: a variant counts as shipped once its files (``model.safetensors`` and
 ``model.json`` of a ``nehmo train`` run, copied to :func:`shipped_value_path`) are in
 ``models/``. The pose-conditioned UR5-Kinova pair, from either arm's side."""
 SHIPPED_VALUE_FUNCTIONS: dict[str, tuple[str, ...]] = {
-    "ur5_ur5": ("bc+sym", "bc", "deepreach"),
-    "ur5_ur5_diag": ("bc+sym",),
-    "ur5_ur5_opposite": ("bc+sym",),
-    "ur5_kinova": ("bc+sym",),
-    "kinova_ur5": ("bc+sym",),
-    "ur5_ur5_any": ("bc+sym",),
+    **value_variants(SHIPPED),
     **{
         name: present
         for name, variants in OPTIONAL_VALUE_FUNCTIONS.items()
         if (present := tuple(v for v in variants if _value_file(name, v).exists()))
     },
 }
-"""Value functions in ``models/`` (system: variants; the optional ones as found at import)."""
+"""Value functions in ``models/`` (system: variants; the optional ones as found at import; both
+lists come from :data:`~nehmo_core.robots.registry.ARM_PAIRS`)."""
 
 
 def shipped_value_path(name: str, variant: str = "bc+sym") -> Path:

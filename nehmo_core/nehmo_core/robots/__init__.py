@@ -1,7 +1,15 @@
-"""Robot models (UR5, Kinova Gen3 6-DoF, planar 2-link) and cell layouts."""
+"""Robot models (UR5, Kinova Gen3 6-DoF, planar 2-link), their registry and cell layouts."""
 
 from nehmo_core.robots.loader import ROBOT_NAMES, cell_names, load_cell, load_robot
-from nehmo_core.robots.model import ArmSpec, Cell, JointSpec, Pose, RobotModel, wrap_angle
+from nehmo_core.robots.model import (
+    ArmSpec,
+    Cell,
+    JointSpec,
+    Pose,
+    RobotFacts,
+    RobotModel,
+    wrap_angle,
+)
 
 __all__ = [
     "ROBOT_NAMES",
@@ -9,6 +17,7 @@ __all__ = [
     "Cell",
     "JointSpec",
     "Pose",
+    "RobotFacts",
     "RobotModel",
     "cell_names",
     "load_cell",

@@ -1,4 +1,5 @@
-"""Load robot models and cell layouts by name (no network access needed).
+"""Load robot models and cell layouts by name (no network access needed); which robots there
+are, and what else is known about them, is in :mod:`nehmo_core.robots.registry`.
 
 * ``ur5``: the URDF, collision meshes and SRDF of the ``example-robot-data`` package. Its
   ``package://`` URIs are rewritten into a cached copy (``$NEHMO_CACHE/robots``).
@@ -22,17 +23,19 @@ from typing import Any
 import yaml
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError, UnknownNameError
-from nehmo_core.robots.model import ArmSpec, Cell, JointSpec, Pose, RobotModel, as_pose
+from nehmo_core.robots.model import (
+    ArmSpec,
+    Cell,
+    JointSpec,
+    Pose,
+    RobotFacts,
+    RobotModel,
+    as_pose,
+)
+from nehmo_core.robots.registry import ROBOT_NAMES, ROBOTS, robot_facts
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 CELLS_DIR = Path(__file__).resolve().parent / "cells"
-
-_ROBOTS: dict[str, dict[str, str]] = {
-    "ur5": {"source": "example-robot-data", "tip": "ee_link"},
-    "kinova_gen3_6dof": {"source": "project", "tip": "end_effector_link"},
-    "planar_2link": {"source": "project", "tip": "tip"},
-}
-ROBOT_NAMES: tuple[str, ...] = tuple(_ROBOTS)
 
 
 def cache_dir() -> Path:
@@ -111,8 +114,11 @@ def _chain(root: ET.Element, tip: str) -> list[ET.Element]:
     return chain[::-1]
 
 
-def robot_from_urdf(name: str, urdf: Path, tip: str, srdf: Path | None = None) -> RobotModel:
-    """Build a :class:`RobotModel` from a URDF file (serial chain root → ``tip``)."""
+def robot_from_urdf(
+    name: str, urdf: Path, tip: str, srdf: Path | None = None, facts: RobotFacts | None = None
+) -> RobotModel:
+    """Build a :class:`RobotModel` from a URDF file (serial chain root → ``tip``); its ``facts``
+    default to the registry's for ``name`` (none for a name the registry does not know)."""
     if not urdf.exists():
         raise ModelFileError(f"robot description not found: {urdf}")
     try:
@@ -155,22 +161,27 @@ def robot_from_urdf(name: str, urdf: Path, tip: str, srdf: Path | None = None) -
         joints=tuple(joints),
         links=links,
         disabled_collision_pairs=_parse_srdf(srdf),
+        facts=robot_facts(name) if facts is None else facts,
     )
 
 
 @functools.cache
 def load_robot(name: str) -> RobotModel:
     """Load a robot model by name (``ur5``, ``kinova_gen3_6dof``, ``planar_2link``)."""
-    if name not in _ROBOTS:
+    if name not in ROBOTS:
         raise UnknownNameError("robot", name, ROBOT_NAMES)
-    info = _ROBOTS[name]
-    if info["source"] == "example-robot-data":
+    entry = ROBOTS[name]
+    if entry.source == "example-robot-data":
         urdf, srdf = _ur5_urdf()
-        return robot_from_urdf(name, urdf, info["tip"], srdf)
+        return robot_from_urdf(name, urdf, entry.tip, srdf, entry.facts)
     folder = DATA_DIR / name
     srdf_path = folder / f"{name}.srdf"
     return robot_from_urdf(
-        name, folder / f"{name}.urdf", info["tip"], srdf_path if srdf_path.exists() else None
+        name,
+        folder / f"{name}.urdf",
+        entry.tip,
+        srdf_path if srdf_path.exists() else None,
+        entry.facts,
     )
 
 

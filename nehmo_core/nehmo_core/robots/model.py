@@ -35,8 +35,26 @@ class JointSpec:
 
 
 @dataclass(frozen=True)
+class RobotFacts:
+    """What NeHMO knows about a robot beyond its URDF, from the robot registry
+    (:mod:`nehmo_core.robots.registry`); a robot the registry does not know has none of them."""
+
+    keypoints: tuple[str, ...] = ()
+    """Links whose frame origins are the learned distance's keypoints, root to tip (empty: no
+    keypoint set, so no learned distance); CHOMP's sphere chains run through them too."""
+    keypoint_segments: tuple[tuple[str, str, int], ...] = ()
+    """``(link a, link b, k)``: ``k`` more keypoints evenly between the two links' origins."""
+    sphere_radius: float = 0.08
+    """[m] Radius of CHOMP's body spheres, covering each link's section."""
+    sampling_ranges: tuple[tuple[float, float], ...] | None = None
+    """``(low, high)`` [rad] per joint of the evaluation protocol's start/goal draws (None: the
+    joint limits clipped to ±π)."""
+
+
+@dataclass(frozen=True)
 class RobotModel:
-    """A fixed-base serial arm described by one URDF (the single source of truth)."""
+    """A fixed-base serial arm described by one URDF (the single source of truth) and the
+    registry's :class:`RobotFacts` about it."""
 
     name: str
     urdf_path: Path
@@ -47,6 +65,8 @@ class RobotModel:
     """Links with collision geometry, root to tip."""
     disabled_collision_pairs: frozenset[frozenset[str]] = field(default_factory=frozenset)
     """Link pairs excluded from self-collision checks (SRDF ``disable_collisions``)."""
+    facts: RobotFacts = field(default_factory=RobotFacts)
+    """Keypoints, CHOMP sphere radius and scenario sampling ranges (see :class:`RobotFacts`)."""
 
     @property
     def dof(self) -> int:

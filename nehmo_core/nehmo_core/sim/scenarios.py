@@ -1,7 +1,8 @@
 """Start/goal sampling per the paper's evaluation protocol, in this project's joint zeros.
 
 The authors sample UR5 joints in their model's zeros; ``example-robot-data``'s UR5 differs by
-−π/2 on shoulder_lift (q₂) and wrist_1 (q₄), so those two ranges are shifted here.
+−π/2 on shoulder_lift (q₂) and wrist_1 (q₄), so those two ranges are shifted (the ranges are the
+robot's ``facts.sampling_ranges``, in the robot registry :mod:`nehmo_core.robots.registry`).
 
 Draws follow the authors' protocol to the number, so that seed 0 reproduces the paper's scenarios:
 
@@ -39,24 +40,6 @@ from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.robots.model import Cell, RobotModel, wrap_angle
 
-_HALF_PI = np.pi / 2
-SAMPLING_RANGES: dict[str, np.ndarray] = {
-    # (dof, 2) [rad]: low, high per joint. Robots not listed sample within their joint limits
-    # (clipped to ±π). For the Kinova Gen3 that is wider than the authors' box, which draws
-    # their limited joints 2 and 4 (7-DoF numbering) in ±2 rather than ±2.41 / ±2.66; the
-    # committed scenario sets were drawn this way.
-    "ur5": np.array(
-        [
-            [-5.0, -1.5],  # wrapped to (−π, π] after the draw
-            [-1.0 - _HALF_PI, 0.5 - _HALF_PI],
-            [1.0, 2.0],
-            [-0.2 - _HALF_PI, 0.8 - _HALF_PI],
-            [-2.5, -0.5],
-            [-1e-4, 0.0],
-        ]
-    ),
-}
-
 PAPER_SEED = 0
 """The seed whose scenario ``i`` is drawn from ``default_rng(i)``, like the authors' trial ``i``."""
 
@@ -81,9 +64,11 @@ draw arm by arm in cell order."""
 
 
 def sampling_box(robot: RobotModel) -> np.ndarray:
-    """``(dof, 2)`` [rad]: the protocol's sampling interval of every joint of ``robot``."""
-    if robot.name in SAMPLING_RANGES:
-        return SAMPLING_RANGES[robot.name]
+    """``(dof, 2)`` [rad]: the protocol's sampling interval of every joint of ``robot``: its
+    ``facts.sampling_ranges`` (the UR5's: the paper's, in this project's zeros), else its joint
+    limits clipped to ±π."""
+    if robot.facts.sampling_ranges is not None:
+        return np.array(robot.facts.sampling_ranges, dtype=np.float64)
     return np.stack([np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi)], axis=1)
 
 

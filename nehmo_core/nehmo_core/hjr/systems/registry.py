@@ -1,6 +1,7 @@
 """The system registry: names accepted by ``make_system`` and ``nehmo train --system``.
 
-Every system is listed here explicitly; the shipped arm pairs are built by
+Every system is listed here explicitly, the arm pairs as the robot registry
+(:mod:`nehmo_core.robots.registry`) names them; they are built by
 :func:`.arm_pairs.make_arm_pair_system`, imported when one is made (it loads the learned
 distance models). :func:`register_system` adds a system (e.g. in a test or a script).
 """
@@ -13,21 +14,14 @@ from nehmo_core.errors import UnknownNameError
 from nehmo_core.hjr.systems.air3d import Air3D
 from nehmo_core.hjr.systems.base import HJISystem
 from nehmo_core.hjr.systems.two_link import TwoLinkPair
+from nehmo_core.robots.registry import PAIR_NAMES
 
 __all__ = ["make_system", "register_system", "system_names"]
 
-ARM_PAIR_NAMES = (
-    "ur5_ur5",
-    "ur5_ur5_diag",
-    "ur5_ur5_opposite",
-    "ur5_kinova",
-    "kinova_ur5",
-    "ur5_ur5_any",
-    "ur5_kinova_any",
-    "kinova_ur5_any",
-)
-"""The arm pairs built by :func:`.arm_pairs.make_arm_pair_system` (``*_any``: conditioned on the
-base distance, for any layout). Building one loads its learned distance, which for
+ARM_PAIR_NAMES = PAIR_NAMES
+"""The arm pairs built by :func:`.arm_pairs.make_arm_pair_system`: every pair of the robot
+registry (:data:`~nehmo_core.robots.registry.ARM_PAIRS`; ``*_any``: conditioned on the base
+distance, for any layout). Building one loads its learned distance, which for
 ``ur5_kinova_any`` / ``kinova_ur5_any`` must be trained first (``nehmo distance train --pair
 ur5_kinova_any``): until then they raise :class:`~nehmo_core.errors.ModelFileError`."""
 

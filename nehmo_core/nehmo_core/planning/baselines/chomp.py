@@ -10,11 +10,11 @@ and goal fixed, initialized by a minimum-jerk (quintic) profile.
 - Smoothness: squared accelerations by the rule ``[0, −1, 16, −30, 16, −1, 0]/12`` on the
   trajectory padded with copies of its end points: ``½ξᵀAξ + bᵀξ`` per joint, ``A = KᵀK``
   (+ ``ridge_factor·I``), in waypoint units as MoveIt's matrix (no ``dt`` scaling).
-- Obstacles: each arm's body is a chain of spheres along its links (from FK); another arm's
-  spheres are its obstacles. With clearance ``ε`` and ``d`` the sphere-sphere distance, the
-  potential is 0 for ``d ≥ ε``, ``(d − ε)²/(2ε)`` for ``0 ≤ d < ε``, ``ε/2 − d`` for ``d < 0``;
-  its functional gradient is CHOMP's, weighted by sphere speed with the curvature term:
-  ``Jᵀ‖ẋ‖[(I − x̂x̂ᵀ)∇c − cκ]``.
+- Obstacles: each arm's body is a chain of spheres along its links (from FK; the links and
+  the radius are the robot's, ``robot.facts``); another arm's spheres are its obstacles. With
+  clearance ``ε`` and ``d`` the sphere-sphere distance, the potential is 0 for ``d ≥ ε``,
+  ``(d − ε)²/(2ε)`` for ``0 ≤ d < ε``, ``ε/2 − d`` for ``d < 0``; its functional gradient is
+  CHOMP's, weighted by sphere speed with the curvature term: ``Jᵀ‖ẋ‖[(I − x̂x̂ᵀ)∇c − cκ]``.
 - Update ``Δξ = −lr·A⁻¹(w_s·∇smooth + w_o·∇obs)``, each joint's increment scaled down to at most
   ``joint_update_limit``; stop after ``max_iterations``, or ``max_iterations_after_collision_free``
   iterations after the sphere model first reports no potential above ``collision_threshold``, or
@@ -35,7 +35,6 @@ import numpy as np
 import torch
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.geometry.distance_model import KEYPOINTS
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.robots.model import Cell, wrap_angle
@@ -43,7 +42,6 @@ from nehmo_core.robots.model import Cell, wrap_angle
 __all__ = ["ChompResult", "ChompSettings", "plan_chomp"]
 
 _ACCEL_RULE = np.array([0.0, -1.0, 16.0, -30.0, 16.0, -1.0, 0.0]) / 12.0
-SPHERE_RADIUS = {"ur5": 0.08, "kinova_gen3_6dof": 0.065}  # [m], covering each link's section
 
 
 @dataclass(frozen=True)
@@ -102,9 +100,8 @@ class _Bodies:
     def __init__(self, cell: Cell, arm_id: str) -> None:
         arm = cell.arm(arm_id)
         self.kin = ArmKinematics(arm.robot, arm.base)
-        self.radius = SPHERE_RADIUS.get(arm.robot.name, 0.08)
-        origins = KEYPOINTS[arm.robot.name]["origins"] if arm.robot.name in KEYPOINTS else None
-        self.links: list[str] = list(origins or self.kin.link_names)
+        self.radius = arm.robot.facts.sphere_radius  # [m], covering each link's section
+        self.links: list[str] = list(arm.robot.facts.keypoints or self.kin.link_names)
         self.dof = arm.robot.dof
 
     def centres(self, q: np.ndarray) -> np.ndarray:

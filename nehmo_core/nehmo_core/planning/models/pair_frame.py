@@ -33,7 +33,6 @@ import numpy as np
 import torch
 
 from nehmo_core.geometry.kinematics import ArmKinematics
-from nehmo_core.robots.loader import load_robot
 from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel, wrap_angle
 
 __all__ = [
@@ -90,13 +89,13 @@ def inverse_pose(pose: Pose) -> Pose:
 
 
 @functools.cache
-def base_yaw_joint(robot_name: str) -> float | None:
+def base_yaw_joint(robot: RobotModel) -> float | None:
     """``s`` if the first joint turns the arm about its base z axis by ``s·q₁`` (s = ±1), else None.
 
-    Read from the URDF chain: the fixed transforms before the first joint must keep its axis on
-    the base's z axis through the origin.
+    Read from the robot's URDF chain (once per robot and process): the fixed transforms before
+    the first joint must keep its axis on the base's z axis through the origin.
     """
-    kin = ArmKinematics(load_robot(robot_name))
+    kin = ArmKinematics(robot)
     T = np.eye(4)
     for step in kin._steps:
         T = T @ step.T_parent_joint.double().numpy()
@@ -133,7 +132,7 @@ def match_pair(own: ArmSpec, peer: ArmSpec, models: Sequence[ModelGeometry]) -> 
     """The first model ``(robot1, robot2, base2[, range])`` the cell pair maps onto, or None."""
     T = relative_pose(own.base, peer.base)
     yaw = _yaw_only(T)
-    s_own, s_peer = base_yaw_joint(own.robot.name), base_yaw_joint(peer.robot.name)
+    s_own, s_peer = base_yaw_joint(own.robot), base_yaw_joint(peer.robot)
     for index, entry in enumerate(models):
         robot1, robot2, base2 = entry[:3]
         base_range = entry[3] if len(entry) > 3 else None
@@ -163,9 +162,9 @@ def match_pair(own: ArmSpec, peer: ArmSpec, models: Sequence[ModelGeometry]) -> 
 
 
 @functools.cache
-def arm_reach(robot_name: str, samples: int = 2000) -> float:
-    """Largest distance [m] of any link-frame origin from the base origin, over random samples."""
-    robot = load_robot(robot_name)
+def arm_reach(robot: RobotModel, samples: int = 2000) -> float:
+    """Largest distance [m] of any link-frame origin from the base origin, over random samples
+    (once per robot and process)."""
     kin = ArmKinematics(robot)
     rng = np.random.default_rng(0)
     lo, hi = np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi)
@@ -188,7 +187,7 @@ def constrained_pairs(
         if peer.arm_id == arm_id:
             continue
         gap = np.linalg.norm(np.subtract(peer.base.xyz, own.base.xyz))
-        if gap > arm_reach(own.robot.name) + arm_reach(peer.robot.name) + reach_margin:
+        if gap > arm_reach(own.robot) + arm_reach(peer.robot) + reach_margin:
             skipped.append(peer.arm_id)
             continue
         mapping = match_pair(own, peer, models)

@@ -53,6 +53,7 @@ from nehmo_core.planning.models.pair_frame import (
 )
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.robots.model import Cell
+from nehmo_core.robots.registry import pairs_by_robots, synthetic_pairs
 
 __all__ = [
     "OPT_KINDS",
@@ -80,17 +81,14 @@ OPT_KINDS: dict[str, str] = {
 SHIPPED = "shipped"
 """The ``model`` text naming the shipped value functions of the cell's robot pairs."""
 SYNTHETIC = "synthetic"
-_SYNTHETIC_PAIRS = {("ur5", "ur5"): "ur5_ur5", ("ur5", "kinova_gen3_6dof"): "ur5_kinova"}
+_SYNTHETIC_PAIRS = synthetic_pairs()
 """(controlled robot, other robot) → pair with a synthetic stand-in (a learned-distance cell)."""
-SHIPPED_PAIRS: dict[tuple[str, str], tuple[str, ...]] = {
-    ("ur5", "ur5"): ("ur5_ur5", "ur5_ur5_diag", "ur5_ur5_opposite", "ur5_ur5_any"),
-    ("ur5", "kinova_gen3_6dof"): ("ur5_kinova", "ur5_kinova_any"),
-    ("kinova_gen3_6dof", "ur5"): ("kinova_ur5", "kinova_ur5_any"),
-}
+SHIPPED_PAIRS: dict[tuple[str, str], tuple[str, ...]] = pairs_by_robots()
 """(controlled robot, other robot) → the shipped value functions of that game, one per base
-distance (``*_any``: any distance in its range, after the fixed ones). The first is required for
-every Opt kind; the others serve the kinds whose variant they ship, when their files are present
-(a peer at their distance is otherwise reported as unconstrained)."""
+distance (``*_any``: any distance in its range, after the fixed ones), as the robot registry
+(:data:`~nehmo_core.robots.registry.ARM_PAIRS`) lists them. The first is required for every Opt
+kind; the others serve the kinds whose variant they ship, when their files are present (a peer
+at their distance is otherwise reported as unconstrained)."""
 
 
 @dataclass(frozen=True)

@@ -50,8 +50,9 @@ bring it within the influence distance (see :meth:`SelfClearance._lipschitz`). O
 closed-loop joint paths of the planning-speed bench, 0.5 m asks 5.4 pairs per step against 7.7
 at 0.15 m (a pair out of reach reads as at the reach, so a short reach brings it back soon)."""
 
-_WITNESS_ORDER: dict[str, dict[tuple[str, str], bool]] = {}
-"""Per robot: :meth:`SelfClearance._witness_order` (found once per process)."""
+_WITNESS_ORDER: dict[RobotModel, dict[tuple[str, str], bool]] = {}
+"""Per robot: :meth:`SelfClearance._witness_order` (found once per process, from the robot's
+own geometry)."""
 
 
 @dataclass
@@ -140,9 +141,9 @@ class SelfClearance:
         self._ref_d = np.zeros(len(self._pairs))
         self.queries = 0  # pair queries made (a pair skipped by its bound costs none)
         self._swapped = {(a, b): False for a, b, _, _ in self._pairs}
-        if robot.name not in _WITNESS_ORDER:
-            _WITNESS_ORDER[robot.name] = self._witness_order()
-        self._swapped = _WITNESS_ORDER[robot.name]
+        if robot not in _WITNESS_ORDER:
+            _WITNESS_ORDER[robot] = self._witness_order()
+        self._swapped = _WITNESS_ORDER[robot]
         self._last = None  # rows computed while the order was being found
 
     def _lipschitz(self, parent: dict[int, int]) -> np.ndarray:
