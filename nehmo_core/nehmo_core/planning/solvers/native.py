@@ -19,14 +19,11 @@ missing or fails, :func:`loop` returns ``None`` and the SQP runs its Python loop
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import subprocess
 import threading
 import warnings
 import weakref
-from dataclasses import dataclass, field
 from functools import cache
-from pathlib import Path
 from typing import cast
 
 import daqp
@@ -34,91 +31,25 @@ import numpy as np
 
 from nehmo_core.errors import NehmoError
 from nehmo_core.planning.models.value_model import PairValueModel
-from nehmo_core.planning.numerics.codegen import _compiler, _cpu, compile_library
-from nehmo_core.planning.numerics.qp import qp_step
 from nehmo_core.planning.opt.problem import OptProblem
-from nehmo_core.robots.loader import cache_dir
+from nehmo_core.planning.solvers.native_support import (
+    _D,
+    _I,
+    _P,
+    MAX_M,
+    MAX_N,
+    ModelHandle,
+    Prepared,
+    RowGroup,
+    SolveBuffers,
+    check_qp,
+    library_path,
+    load_model,
+)
 
 __all__ = ["STATUSES", "NativeLoop", "loop"]
 
-SOURCE = Path(__file__).with_name("sqp_loop.c")
-CFLAGS = ("-O2", "-march=native", "-fno-math-errno", "-fPIC", "-shared")
 STATUSES = ("optimal", "infeasible", "iteration_limit", "timeout", "failed", "evaluation error")
-MAX_N, MAX_M = 16, 64  # NEHMO_MAX_N, NEHMO_MAX_M in the C file
-
-_P = ctypes.c_void_p
-_D = ctypes.c_double
-_I = ctypes.c_int
-
-
-class _Group(ctypes.Structure):
-    _fields_ = [
-        ("fn", _P),
-        ("iw", _P),
-        ("w", _P),
-        ("n", _I),
-        ("k", _I),
-        ("states", _P),
-        ("x", _P),
-        ("g", _P),
-        ("arg", _P),
-        ("res", _P),
-        ("tau", _D),
-        ("eps", _D),
-    ]
-
-
-@dataclass(frozen=True)
-class _Prepared:
-    """The arguments of ``nehmo_sqp_iterate`` fixed by the constraints, and their memory."""
-
-    fixed: tuple[object, ...]  # groups, group structs, nlin, A, b
-    structs: ctypes.Array[_Group]
-    alive: list[np.ndarray]
-    m: int
-
-
-@dataclass
-class _ModelHandle:
-    """A pair model's generated V/∇V function: its C pointer and work arrays."""
-
-    library: ctypes.CDLL  # kept alive with the pointer
-    fn: int
-    iw: np.ndarray
-    w: np.ndarray
-    x: np.ndarray
-    g: np.ndarray
-    arg: np.ndarray  # sz_arg pointer slots
-    res: np.ndarray  # sz_res pointer slots
-
-    addresses: tuple[int, ...] = field(init=False)  # of iw, w, x, g, arg, res
-
-    def __post_init__(self) -> None:
-        # read once: each ``.ctypes.data`` costs about a microsecond
-        arrays = (self.iw, self.w, self.x, self.g, self.arg, self.res)
-        self.addresses = tuple(a.ctypes.data for a in arrays)
-
-
-class _SolveBuffers:
-    """The arrays ``nehmo_sqp_solve`` reads and writes, allocated once at the C loop's sizes
-    (their addresses too): a solve copies its inputs in rather than converting each one."""
-
-    def __init__(self) -> None:
-        n, m = MAX_N, MAX_M
-        self.vectors = np.zeros((4, n))  # error0, start, naive and y (out)
-        self.c0, self.c = np.zeros(m), np.zeros(m)
-        self.J0 = np.zeros(m * n)
-        self.B0, self.B = np.zeros(n * n), np.zeros(n * n)
-        self.keep = np.zeros(m, dtype=np.uint8)
-        self.ints = (ctypes.c_int * 2)()  # iterations, QP flag
-        rows = self.vectors.ctypes.data
-        self.e0_at, self.start_at, self.naive_at, self.y_at = (rows + 8 * n * i for i in range(4))
-        self.c0_at, self.c_at = self.c0.ctypes.data, self.c.ctypes.data
-        self.J0_at = self.J0.ctypes.data
-        self.B0_at, self.B_at = self.B0.ctypes.data, self.B.ctypes.data
-        self.keep_at = self.keep.ctypes.data
-        self.ints_at = ctypes.addressof(self.ints)
-        self.flag_at = self.ints_at + ctypes.sizeof(ctypes.c_int)
 
 
 class NativeLoop:
@@ -147,10 +78,10 @@ class NativeLoop:
         self.qp_fn = library.nehmo_qp_check
         self.qp_fn.restype = _I
         self.qp_fn.argtypes = [_P, _P, _I, _I, _P, _P, _P, _P, _P, _P, _P, _P]
-        self._models: weakref.WeakKeyDictionary[PairValueModel, _ModelHandle | None] = (
+        self._models: weakref.WeakKeyDictionary[PairValueModel, ModelHandle | None] = (
             weakref.WeakKeyDictionary()
         )
-        self._local = threading.local()  # per thread: its _SolveBuffers
+        self._local = threading.local()  # per thread: its SolveBuffers
 
     def qp(
         self,
@@ -170,50 +101,27 @@ class NativeLoop:
         flag = self.qp_fn(self.quadprog, ctypes.addressof(self.settings), n, m, *args)
         return p, lam, int(flag)
 
-    def model(self, model: PairValueModel) -> _ModelHandle | None:
+    def model(self, model: PairValueModel) -> ModelHandle | None:
         """The C handle of ``model``'s V/∇V, or ``None`` if it has no generated library."""
         if model in self._models:
             return self._models[model]
-        handle = None
-        if model.library is not None and model.backend == "compiled":
-            lib = ctypes.CDLL(str(model.library))
-            name = model.value_grad.name()
-            size = getattr(lib, f"{name}_casadi_int_size")
-            size.restype = ctypes.c_int
-            if size() == 8:
-                work = getattr(lib, f"{name}_work")
-                sizes = [ctypes.c_longlong() for _ in range(4)]
-                if work(*[ctypes.byref(s) for s in sizes]) == 0:
-                    n_arg, n_res, n_iw, n_w = (int(s.value) for s in sizes)
-                    if n_arg >= 2 and n_res >= 2:
-                        fn = ctypes.cast(getattr(lib, name), _P).value
-                        n = model.state_dim
-                        handle = _ModelHandle(
-                            lib,
-                            int(fn or 0),
-                            np.zeros(max(n_iw, 1), dtype=np.int64),
-                            np.zeros(max(n_w, 1)),
-                            np.zeros(n),
-                            np.zeros(n),
-                            np.zeros(n_arg, dtype=np.uintp),
-                            np.zeros(n_res, dtype=np.uintp),
-                        )
+        handle = load_model(model)
         self._models[model] = handle
         return handle
 
-    def _prepare(self, problem: OptProblem) -> _Prepared | None:
+    def _prepare(self, problem: OptProblem) -> Prepared | None:
         """The C side's view of ``problem``'s constraints (kept on them: the restarts of one
         solve reuse it), or ``None`` when a model has no C handle or the problem is too big."""
         cons = problem.constraints
         scratch = cons.scratch
         if "native" in scratch:
-            return cast("_Prepared | None", scratch["native"])
+            return cast("Prepared | None", scratch["native"])
         models, groups, linear = cons.models, cons.groups, cons.linear
         n = len(problem.error0)  # the C loop's sizes bound n and m
-        structs = (_Group * max(len(groups), 1))()
+        structs = (RowGroup * max(len(groups), 1))()
         alive: list[np.ndarray] = []  # arrays the C side reads, kept referenced with the structs
         m = 0
-        prepared: _Prepared | None = None
+        prepared: Prepared | None = None
         for g, (slot, (index, states)) in enumerate(zip(structs, groups, strict=False)):
             handle = self.model(models[index])
             if handle is None:
@@ -238,7 +146,7 @@ class NativeLoop:
                 fixed += (ctypes.addressof(structs), nlin)
                 fixed += (A.ctypes.data if A is not None else None,)
                 fixed += (b.ctypes.data if b is not None else None,)
-                prepared = _Prepared(fixed, structs, alive, m)
+                prepared = Prepared(fixed, structs, alive, m)
         scratch["native"] = prepared
         return prepared
 
@@ -319,7 +227,7 @@ class NativeLoop:
             return None
         io = getattr(self._local, "io", None)
         if io is None:
-            io = self._local.io = _SolveBuffers()
+            io = self._local.io = SolveBuffers()
         n, m = len(y_start), prepared.m
         rows = problem.constraints.value_count
         io.vectors[0, :n] = problem.error0
@@ -366,45 +274,15 @@ class NativeLoop:
         return STATUSES[code], io.ints[0], y, c, hessian, io.ints[1]
 
 
-def _check(native: NativeLoop) -> str | None:
-    """Compare the C QP path with ``daqp.solve`` (via :func:`.qp.qp_step`); a reason if off."""
-    rng = np.random.default_rng(7)
-    for trial in range(12):
-        n, m = 6 + trial % 2, 1 + trial % 4
-        L = rng.standard_normal((n, n))
-        B = L @ L.T + n * np.eye(n)
-        grad = rng.standard_normal(n)
-        J = rng.standard_normal((m, n))
-        c = rng.uniform(-0.3, 0.1, m) if trial < 10 else np.full(m, -5.0)
-        lo, hi = -0.1 * np.ones(n), 0.1 * np.ones(n)
-        if trial >= 10:
-            J[:] = 0.0
-            J[:, 0] = 1.0  # c + p₀ ≥ 0 needs p₀ ≥ 5 > hi: infeasible
-        ref = qp_step(B, grad, c, J, lo, hi)
-        p, lam, flag = native.qp(B, grad, c, J, lo, hi)
-        if flag != ref.flag:
-            return f"DAQP flag {flag} against daqp.solve's {ref.flag} (trial {trial})"
-        if ref.feasible and (np.abs(p - ref.p).max() > 1e-10 or np.abs(lam - ref.lam).max() > 1e-8):
-            return f"QP solution differs from daqp.solve's (trial {trial})"
-    return None
-
-
 @cache
 def loop() -> NativeLoop | None:
     """The C SQP loop, compiled and checked once per process; ``None`` if unavailable."""
-    compiler = _compiler()
-    if compiler is None:
-        return None
-    source = SOURCE.read_bytes()
-    key = hashlib.sha256(
-        b"\0".join([source, compiler.encode(), " ".join(CFLAGS).encode(), _cpu().encode()])
-    ).hexdigest()[:20]
-    target = cache_dir() / "casadi" / f"nehmo_sqp_loop_{key}.so"
     try:
-        if not target.exists():
-            compile_library(SOURCE, target, compiler, CFLAGS)
+        target = library_path()
+        if target is None:
+            return None
         native = NativeLoop(ctypes.CDLL(str(target)))
-        reason = _check(native)
+        reason = check_qp(native)
     except (OSError, AttributeError, subprocess.CalledProcessError) as exc:
         reason = getattr(exc, "stderr", "") or str(exc)
     if reason:
