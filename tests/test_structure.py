@@ -150,3 +150,40 @@ def test_ros_nodes_use_planners_through_their_interface() -> None:
             if node.func.id == "hasattr" or "planner" in subject:  # _PLANNER: settings
                 found.append(f"{path.name}:{node.lineno}: {ast.unparse(node)}")
     assert not found, found
+
+
+PLANNING_MAX_LINES = 300
+#: planning's layers, bottom first: a module may import its own layer's package and those below
+PLANNING_LAYERS = {
+    "numerics": 0,
+    "models": 1,
+    "opt": 2,
+    "solvers": 3,
+    "stages": 3,
+    "baselines": 3,
+    "nehmo": 4,
+    "factory": 4,
+}
+
+
+def test_planning_modules_are_short_and_layered() -> None:
+    long = {
+        _planning_module(p): n
+        for p in PLANNING.rglob("*.py")
+        if (n := len(p.read_text().splitlines())) > PLANNING_MAX_LINES
+    }
+    assert not long, f"planning modules over {PLANNING_MAX_LINES} lines: {long}"
+    upward = []
+    for path in PLANNING.rglob("*.py"):
+        me = _planning_module(path).split(".")[0]
+        if me == "__init__":
+            continue
+        for other in _planning_imports(path):
+            top = other.split(".")[0]
+            if top == me or top == "__init__":
+                continue
+            if PLANNING_LAYERS[top] > PLANNING_LAYERS[me] or (
+                PLANNING_LAYERS[top] == PLANNING_LAYERS[me] and PLANNING_LAYERS[me] < 4
+            ):
+                upward.append(f"{_planning_module(path)} imports {other}")
+    assert not upward, upward

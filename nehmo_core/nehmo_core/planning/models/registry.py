@@ -29,10 +29,7 @@ given as ``[KIND=]SOURCE``:
 
 from __future__ import annotations
 
-import hashlib
-import shutil
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +47,15 @@ from nehmo_core.planning.models.pair_frame import (
     match_pair,
     pose_from_matrix,
     relative_pose,
+)
+from nehmo_core.planning.models.sources import (
+    OPT_KINDS,
+    SHIPPED,
+    SYNTHETIC,
+    ValueModelSource,
+    model_sources,
+    parse_value_models,
+    snapshot_value_models,
 )
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.robots.model import Cell
@@ -70,17 +76,6 @@ __all__ = [
     "swapped_pair_model",
 ]
 
-OPT_KINDS: dict[str, str] = {
-    "nehmo": "bc+sym",
-    "nehmo_paper": "bc+sym",
-    "nehmo_no_sym": "bc",
-    "opt_deepreach": "deepreach",
-    "nehmo_wrap": "bc+sym",
-}
-"""Planner kinds solving problem Opt, with the value-function variant each row uses."""
-SHIPPED = "shipped"
-"""The ``model`` text naming the shipped value functions of the cell's robot pairs."""
-SYNTHETIC = "synthetic"
 _SYNTHETIC_PAIRS = synthetic_pairs()
 """(controlled robot, other robot) → pair with a synthetic stand-in (a learned-distance cell)."""
 SHIPPED_PAIRS: dict[tuple[str, str], tuple[str, ...]] = pairs_by_robots()
@@ -89,71 +84,6 @@ distance (``*_any``: any distance in its range, after the fixed ones), as the ro
 (:data:`~nehmo_core.robots.registry.ARM_PAIRS`) lists them. The first is required for every Opt
 kind; the others serve the kinds whose variant they ship, when their files are present (a peer
 at their distance is otherwise reported as unconstrained)."""
-
-
-@dataclass(frozen=True)
-class ValueModelSource:
-    """Where pair value models come from, for one Opt kind (``kind``) or every one (None)."""
-
-    source: str
-    kind: str | None = None
-
-    def __str__(self) -> str:
-        return self.source if self.kind is None else f"{self.kind}={self.source}"
-
-
-def parse_value_models(items: Sequence[str]) -> tuple[ValueModelSource, ...]:
-    """Parse ``[KIND=]SOURCE`` strings (see the module docstring)."""
-    out = []
-    for item in items:
-        head, sep, tail = item.partition("=")
-        if sep and head in OPT_KINDS:
-            out.append(ValueModelSource(tail, head))
-        elif sep and "/" not in head and "." not in head:
-            raise InvalidValueError(
-                "value model", f"must be [KIND=]SOURCE with KIND in {sorted(OPT_KINDS)}", item
-            )
-        else:
-            out.append(ValueModelSource(item))
-        if not out[-1].source:
-            raise InvalidValueError("value model", "must name a source after '='", item)
-    return tuple(out)
-
-
-def _weights_file(source: Path) -> Path:
-    """The weights a path source loads (as :func:`load_value_function` does)."""
-    if source.is_dir():
-        model = source / "model.safetensors"
-        return model if model.exists() else source / "checkpoint.safetensors"
-    return source
-
-
-def snapshot_value_models(
-    sources: Sequence[ValueModelSource], directory: str | Path
-) -> tuple[ValueModelSource, ...]:
-    """Copy every path source's weights (and JSON sidecar) under ``directory``.
-
-    A training run rewrites its checkpoint in place; evaluating a snapshot makes every worker
-    (and every later re-run) use the same weights. Shipped names and ``synthetic`` pass through.
-    """
-    out = []
-    for s in sources:
-        named = s.source in SHIPPED_VALUE_FUNCTIONS or s.source in OPTIONAL_VALUE_FUNCTIONS
-        if s.source == SYNTHETIC or named:
-            out.append(s)
-            continue
-        src = _weights_file(Path(s.source))
-        if not src.is_file():
-            raise ModelFileError(f"value model {s.source!r}: no weights file {src}")
-        digest = hashlib.sha256(src.read_bytes()).hexdigest()[:12]
-        dest = Path(directory) / f"{Path(s.source).name}_{digest}" / src.name
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        sidecar = src.with_suffix(".json")
-        if sidecar.exists():
-            shutil.copy2(sidecar, dest.with_suffix(".json"))
-        shutil.copy2(src, dest)
-        out.append(ValueModelSource(str(dest), s.kind))
-    return tuple(out)
 
 
 def robot_pairs(cell: Cell) -> list[tuple[str, str]]:
@@ -332,23 +262,6 @@ def _cell_uses(pair: str, cell: Cell) -> bool:
 
 def _kind_for(variant: str) -> str:
     return next((k for k, v in OPT_KINDS.items() if v == variant), "KIND")
-
-
-def model_sources(model: str) -> tuple[ValueModelSource, ...]:
-    """The value-model sources a comma-separated text names (none for ``shipped``).
-
-    The text form is what the planner node's ``model`` parameter and the orchestrator take:
-    ``shipped`` (or empty), ``synthetic``, or ``[KIND=]SOURCE`` items separated by commas.
-    """
-    text = model.strip()
-    if text in ("", SHIPPED):
-        return ()
-    items = [item.strip() for item in text.split(",") if item.strip()]
-    if not items:
-        raise InvalidValueError(
-            "model", "must be 'shipped', 'synthetic' or [KIND=]PATH items", model
-        )
-    return parse_value_models(items)
 
 
 def model_registry(model: str) -> ModelRegistry:
