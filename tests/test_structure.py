@@ -187,3 +187,19 @@ def test_planning_modules_are_short_and_layered() -> None:
             ):
                 upward.append(f"{_planning_module(path)} imports {other}")
     assert not upward, upward
+
+
+TEST_MAX_LINES = 500
+
+
+def test_test_files_mirror_the_packages_and_are_short() -> None:
+    tests = ROOT / "tests"
+    long = {
+        str(p.relative_to(ROOT)): n
+        for p in tests.rglob("*.py")
+        if (n := len(p.read_text().splitlines())) > TEST_MAX_LINES
+    }
+    assert not long, f"test files over {TEST_MAX_LINES} lines: {long}"
+    folders = {p.name for p in tests.iterdir() if p.is_dir() and p.name != "data"}
+    packages = {p.name for p in CORE.iterdir() if (p / "__init__.py").exists()} | {"ros"}
+    assert folders <= packages, f"test folders without a package: {sorted(folders - packages)}"

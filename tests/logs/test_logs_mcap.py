@@ -49,7 +49,7 @@ from nehmo_core.logs import (
 )
 from nehmo_core.logs.recover import recover
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 ARMS = ["ur5_0", "ur5_1"]
 SCENARIO = {"cell": "dual_ur5", "seed": 3, "arms": ARMS, "time_limit_s": 20.0}
 

@@ -279,7 +279,7 @@ def test_an_arm_between_two_pushing_peers_chatters_less_and_collides_no_more_oft
     assert sum(f for _, f in maximin) < 0.5 * sum(f for _, f in single)
 
 
-SANDWICHED = Path(__file__).parent / "data" / "sandwiched"
+SANDWICHED = Path(__file__).parents[1] / "data" / "sandwiched"
 
 
 # the fail-safe each scenario was found with, which drove an arm into a peer (None: none did)

@@ -18,7 +18,7 @@ from nehmo_core.planning.stages.silent_peers import APPROACH, SilentPathWatch
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import load_scenario_set
 
-SCENARIOS = Path(__file__).parent / "data" / "silent_peers"
+SCENARIOS = Path(__file__).parents[1] / "data" / "silent_peers"
 
 
 class _Gap:

@@ -22,7 +22,7 @@ from nehmo_core.sim.scenarios import Scenario
 from nehmo_ros.suite import run_episode as run_ros_episode
 from nehmo_ros.suite_settings import SuiteSettings
 
-CELL_FILE = Path(__file__).resolve().parents[1] / "examples" / "cells" / "irregular_three_ur5.yaml"
+CELL_FILE = Path(__file__).resolve().parents[2] / "examples" / "cells" / "irregular_three_ur5.yaml"
 CELL = load_cell(CELL_FILE)
 
 

@@ -17,7 +17,7 @@ from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_ros.arm_planner import PARAMS
 from nehmo_ros.control import ControlSettings
 
-CONFIG = Path(__file__).resolve().parents[1] / "nehmo_ros" / "config" / "arm_planner.yaml"
+CONFIG = Path(__file__).resolve().parents[2] / "nehmo_ros" / "config" / "arm_planner.yaml"
 NODE_ONLY = {"deadline"}  # node semantics: 0 means 75 % of the period
 
 

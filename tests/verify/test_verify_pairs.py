@@ -16,7 +16,7 @@ from nehmo_core.robots.model import Cell
 from nehmo_core.verify.distributions import visited_pair_states
 from nehmo_core.verify.truth import exact_margin
 
-IRREGULAR = Path(__file__).resolve().parents[1] / "examples" / "cells" / "irregular_three_ur5.yaml"
+IRREGULAR = Path(__file__).resolve().parents[2] / "examples" / "cells" / "irregular_three_ur5.yaml"
 
 
 def _joint_states(count: int, seed: int) -> np.ndarray:

@@ -22,7 +22,7 @@ from nehmo_core.eval.ha_tasks import (
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.stages import exact_guard, self_clearance
 
-TASKS = Path(__file__).parent / "data" / "ha_tasks"
+TASKS = Path(__file__).parents[1] / "data" / "ha_tasks"
 
 
 def test_tasks_load_as_cells_with_their_base_poses() -> None:

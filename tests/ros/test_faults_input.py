@@ -4,7 +4,7 @@ Node parameters, cell YAML, scenario files and model files reach the nodes as pa
 command-line tools take log files. Every case runs the real entry point as a process (all of
 them at once, to keep the wall time down) and expects exit status 2 (1 for ``recover``), one
 line on stderr naming the parameter or file, the rule and the value, and no traceback.
-(``tests/test_nodes_params.py`` holds the plain parameter-value cases.)
+(``tests/ros/test_nodes_params.py`` holds the plain parameter-value cases.)
 """
 
 from __future__ import annotations
