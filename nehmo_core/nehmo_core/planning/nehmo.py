@@ -40,10 +40,12 @@ from nehmo_core.planning.opt.pipeline import (
     Objective,
     RowProvider,
     Stage,
+    peer_vectors,
+    read_tick,
 )
 from nehmo_core.planning.opt.problem import LinearRows, OptProblem, project_step
 from nehmo_core.planning.opt.settings import PlannerSettings
-from nehmo_core.planning.opt.tick import PeerValues, Tick, peer_vectors, read_tick
+from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.planning.solvers.base import OptSolver, make_solver, ready_solver
 from nehmo_core.planning.stages import build_stages
 from nehmo_core.robots.model import Cell
