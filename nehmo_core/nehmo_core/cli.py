@@ -27,6 +27,12 @@ _COMMANDS: dict[str, tuple[str, str, str, str]] = {
         "run",
         "evaluate planners on the paper's setups (metrics from the logs)",
     ),
+    "tasks": (
+        "nehmo_core.eval.task_generator_cli",
+        "add_arguments",
+        "run",
+        "generate task files in Ha et al.'s format (random bases, collision-free starts, goals)",
+    ),
     "train": (
         "nehmo_core.hjr.train_cli",
         "add_train_arguments",
