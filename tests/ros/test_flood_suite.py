@@ -128,7 +128,6 @@ def test_a_node_failing_at_start_up_stops_the_episode_with_its_reason(tmp_path: 
         )
     )
     out = tmp_path / "demo"
-    startup_timeout = 60.0  # the demo's: the bridge would wait this long for the planners
     proc = subprocess.run(
         [sys.executable, "-m", "nehmo_ros.demo", "--cell", str(cell), "--out", str(out)],
         env=child_env(),
@@ -146,7 +145,7 @@ def test_a_node_failing_at_start_up_stops_the_episode_with_its_reason(tmp_path: 
     summary = json.loads((out / "summary.json").read_text())
     (episode,) = summary["episodes"]
     assert episode["outcome"] == "error" and summary["metrics"]["errors"] == 1
-    # stopped when the planner exited, not after the bridge gave up waiting for it
-    assert episode["wall_seconds"] < startup_timeout, episode
+    # stopped when the planner exited: a bridge that gave up waiting for the planners would
+    # have started the episode without them
     bridge = (out / "logs" / "episode_000" / "sim_bridge.log").read_text()
     assert "episode started" not in bridge

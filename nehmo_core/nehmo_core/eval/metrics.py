@@ -21,6 +21,8 @@ the plan), MPL [rad] (mean ± std over successful episodes), fail-safe rate and 
 from __future__ import annotations
 
 import math
+import sys
+import traceback
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -256,9 +258,6 @@ def evaluate_or_error(
 def failed_episode(what: str, exc: BaseException) -> EpisodeResult:
     """The ``error`` result of an episode that raised ``exc`` (called in the ``except`` block):
     the traceback goes to stderr under ``what`` (which episode), the reason into the result."""
-    import sys
-    import traceback
-
     reason = f"{type(exc).__name__}: {one_line(exc)}"
     print(f"{what} failed: {reason}\n{traceback.format_exc()}", file=sys.stderr, flush=True)
     return EpisodeResult.failed(reason)

@@ -89,8 +89,10 @@ def _decode(msgtype: str, data: bytes) -> Any:
     return deserialize(data, msgtype)
 
 
-def _open(make_reader: Any, stream: Any, file: Path) -> Any:
+def _open(stream: Any, file: Path) -> Any:
     """An MCAP reader of ``stream``, or :class:`LogFileError` naming ``file``."""
+    from mcap.reader import make_reader
+
     try:
         return make_reader(stream)
     except Exception as err:  # mcap raises several unrelated types on files that are not MCAP
@@ -101,12 +103,10 @@ def _open(make_reader: Any, stream: Any, file: Path) -> Any:
 
 def iter_log(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[LogRecord]:
     """Every message of a finished log in log-time order (per file), optionally only `topics`."""
-    from mcap.reader import make_reader
-
     wanted = list(topics) if topics else None
     for file in bag_files(path):
         with file.open("rb") as stream:
-            reader = _open(make_reader, stream, file)
+            reader = _open(stream, file)
             try:
                 for schema, channel, message in reader.iter_messages(topics=wanted):
                     msgtype = schema.name if schema is not None else ""
@@ -137,13 +137,11 @@ def read_log(path: str | Path, topics: Iterable[str] | None = None) -> list[LogR
 
 def summarize(path: str | Path) -> LogSummary:
     """Topics, types, counts and time span of a finished log, from its MCAP summaries."""
-    from mcap.reader import make_reader
-
     topics: dict[str, tuple[str, int]] = {}
     start, end, count, profile = None, 0, 0, ""
     for file in bag_files(path):
         with file.open("rb") as stream:
-            reader = _open(make_reader, stream, file)
+            reader = _open(stream, file)
             try:
                 profile = reader.get_header().profile
                 summary = reader.get_summary()

@@ -237,7 +237,7 @@ class NehmoPlanner:
             u = self.keep_rows(np.clip(-tick.error0, -y_max, y_max) / s.t_plan, tick.rows)
             self._warm = u * s.t_plan
             return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
-        now = tick.now = self.current(tick.q, tick.peers, tick.bounds)
+        now = self.current(tick.q, tick.peers, tick.bounds)
         target = self._target(tick, now)
         problem = self.problem(target, now, tick.rows, tick.cap)
         result, status = self._solve(problem, deadline)

@@ -60,5 +60,4 @@ class Tick:
     cap: float = FULL_SPEED
     announced: float = FULL_SPEED
     rows: LinearRows | None = None
-    now: PeerValues | None = None
     steered_by: str | None = None
