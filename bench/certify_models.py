@@ -26,7 +26,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.verify.report import certificate_stem, certificates_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -45,7 +45,7 @@ MODELS = [  # (pair, variant, episode setups whose logs hold its pair states)
 ]
 TAUS = (0.3, 0.1)
 _DEFAULTS = PlannerSettings()
-SLOW_TAU = round(_DEFAULTS.hold_bound * _DEFAULTS.t_safe, 6)  # a settled peer's rows [s]
+SLOW_TAU = round(_DEFAULTS.hold.bound * _DEFAULTS.opt.t_safe, 6)  # a settled peer's rows [s]
 
 
 def main() -> int:

@@ -24,7 +24,7 @@ import numpy as np
 
 from nehmo_core.hjr import load_value_function
 from nehmo_core.hjr.systems import ArmPairSystem
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.verify.bound import violation_bound
 from nehmo_core.verify.certify import VerifySettings, worst_margins
 from nehmo_core.verify.distributions import (
@@ -94,8 +94,8 @@ def main() -> int:
     parser.add_argument("--only", help="comma-separated pair names")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    t_safe = PlannerSettings().t_safe
-    floor = PlannerSettings().epsilon
+    t_safe = PlannerSettings().opt.t_safe
+    floor = PlannerSettings().opt.epsilon
     only = set(args.only.split(",")) if args.only else None
     out = ROOT / "bench" / "results" / "falsification"
     previous = (

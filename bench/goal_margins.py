@@ -29,7 +29,7 @@ from nehmo_core.eval.setups import get_setup
 from nehmo_core.planning.factory import make_planner
 from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.sim.scenario_files import load_scenario_set
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -40,7 +40,7 @@ SETUPS = {  # setup → (table file, nehmo row)
     "ur5_kinova_challenging": ("table_IV_ur5_kinova_challenging.json", "nehmo/nehmo"),
 }
 T_PLANS = (0.1, 0.08, 0.04)
-BOUNDS = (PlannerSettings().hold_bound, 0.0)
+BOUNDS = (PlannerSettings().hold.bound, 0.0)
 
 
 def goal_margin(
@@ -78,7 +78,7 @@ def run_seed(seed: int, registry: ModelRegistry) -> dict[str, Any]:
         models = registry.models_for("nehmo", cell)
         margins: dict[str, list[float]] = {}
         for t_plan in T_PLANS:
-            settings = PlannerSettings(t_plan=t_plan)
+            settings = PlannerSettings().override({"opt.t_plan": t_plan})
             planners = {a: make_planner("nehmo", cell, a, models, settings) for a in cell.arm_ids}
             margins[str(t_plan)] = [goal_margin(planners, g) for g in goals]  # type: ignore[arg-type]
         planners = {a: make_planner("nehmo", cell, a, models) for a in cell.arm_ids}
@@ -122,9 +122,9 @@ def markdown(report: dict[str, Any]) -> str:
         "constraint fails for the zero step: no safe Opt planner can hold every arm exactly at "
         "its goal, so such an episode succeeds only if the arms stop within the success "
         "tolerance short of the exact goals. Shipped models, default settings "
-        f"(ε = {d.epsilon}, t_safe = {d.t_safe}). Columns: peers at full speed (the paper's "
-        f"game) for three `t_plan`; every peer settled and keeping the hold bound k "
-        f"(`V(k·t_safe) ≥ ε`; k = {BOUNDS[0]:g} is the default `hold_bound`; k = 0 compares the "
+        f"(ε = {d.opt.epsilon}, t_safe = {d.opt.t_safe}). Columns: peers at full speed "
+        f"(the paper's game) for three `t_plan`; every peer settled and keeping the hold bound k "
+        f"(`V(k·t_safe) ≥ ε`; k = {BOUNDS[0]:g} is the default `hold.bound`; k = 0 compares the "
         "goals' learned distance with ε). Outcomes: the `nehmo` row of the table of that seed "
         f"(the run that produced it), against the margin at k = {BOUNDS[0]:g}.",
         "",

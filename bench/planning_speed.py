@@ -67,7 +67,7 @@ from nehmo_core.planning.models.synthetic import planning_distance_model, random
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.numerics.codegen import compile_function
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import Scenario, sample_scenario
@@ -76,13 +76,13 @@ RESULTS = Path(__file__).resolve().parent / "results"
 CASES = (("dual_ur5", "ur5_0", 1), ("triple_ur5", "ur5_0", 2), ("five_ur5", "ur5_0", 4))
 # plan() is called without peer_bounds here, so every peer counts as one that announces nothing;
 # in cells of NeHMO arms all peers announce and the silent-path watch never acts: it is off
-WATCH_OFF = PlannerSettings(silent_lookahead=0.0)
+WATCH_OFF = PlannerSettings().override({"silent_watch.lookahead": 0.0})
 VARIANTS = {
     "nehmo": WATCH_OFF,
-    "nehmo, Python SQP loop": WATCH_OFF.replace(sqp_native=False),
-    "nehmo, tight SQP": WATCH_OFF.replace(sqp_tol=1e-7, sqp_screen=math.inf),
-    "nehmo, no speed bounds, single fail-safe": WATCH_OFF.replace(
-        hold_bound=1.0, fail_safe="single"
+    "nehmo, Python SQP loop": WATCH_OFF.override({"solver.sqp_native": False}),
+    "nehmo, tight SQP": WATCH_OFF.override({"solver.sqp_tol": 1e-7, "solver.sqp_screen": math.inf}),
+    "nehmo, no speed bounds, single fail-safe": WATCH_OFF.override(
+        {"hold.bound": 1.0, "fail_safe.kind": "single"}
     ),
     "nehmo_paper": PlannerSettings.preset("paper"),
 }
@@ -310,7 +310,8 @@ def run(
     # IPOPT, the authors' solver, on the dual cell for reference
     cell = load_cell("dual_ur5")
     ipopt = {
-        a: NehmoPlanner(cell, a, [model], WATCH_OFF.replace(solver="ipopt")) for a in cell.arm_ids
+        a: NehmoPlanner(cell, a, [model], WATCH_OFF.override({"solver.name": "ipopt"}))
+        for a in cell.arm_ids
     }
     scenario = _scenarios("dual_ur5", 1, 200)[0]
     t, s, _ = _episode("dual_ur5", ipopt, scenario, min(steps, 100), "ur5_0")

@@ -17,6 +17,7 @@ agree (the replay also checks them against the reference).
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import statistics
@@ -24,6 +25,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -34,14 +36,17 @@ CASES = ("five_ur5", "five_ur5_guard", "reckless_kinova", "dual_ur5_paper")
 def _measure(passes: int) -> dict[str, dict[str, float]]:
     from nehmo_core.eval.planners import build_planners
     from nehmo_core.eval.setups import get_setup, parse_row
+    from nehmo_core.planning.models.registry import ModelRegistry
     from nehmo_core.sim.scenarios import generate_scenario_set
 
-    try:
-        from nehmo_core.planning.models.registry import ModelRegistry
-        from nehmo_core.planning.opt.settings import PlannerSettings
-    except ImportError:  # a tree from before planning/ had subpackages
-        from nehmo_core.planning.models import ModelRegistry  # type: ignore[no-redef,attr-defined]
-        from nehmo_core.planning.settings import PlannerSettings  # type: ignore[no-redef]
+    def preset(name: str) -> Any:
+        try:  # settings in groups
+            from nehmo_core.planning.settings import PlannerSettings
+
+            return PlannerSettings.preset(name, {"opt.deadline": 3600.0})
+        except ImportError:  # a tree from before the groups: flat settings
+            old = importlib.import_module("nehmo_core.planning.opt.settings")
+            return old.PlannerSettings.preset(name, deadline=3600.0)
 
     out = {}
     for name in CASES:
@@ -51,7 +56,7 @@ def _measure(passes: int) -> dict[str, dict[str, float]]:
         setup = get_setup(meta["setup"])
         cell = setup.load_cell()
         scenario = generate_scenario_set(cell, meta["seed"], 1).scenarios[0]
-        settings = PlannerSettings.preset(meta["preset"], deadline=3600.0)
+        settings = preset(meta["preset"])
         times: list[float] = []
         worst = 0.0
         for _ in range(passes):

@@ -10,7 +10,7 @@ screening). The closed loop follows the default answer. Reported per cell: how t
 pair up, the largest joint difference of the two steps [rad] where both are optimal, the
 relative cost difference, the smallest constraint value of the default answer, and the time of
 both solves (median and p95 over the constrained steps). The default solver iterates in C; each
-problem is also solved by its Python loop (``sqp_native=False``, the same algorithm), and the
+problem is also solved by its Python loop (``solver.sqp_native`` false, the same algorithm), and the
 last columns say how often the two agree on status and iteration count and how far their steps
 are apart. Where the default reports ``infeasible`` (the planner falls back to its fail-safe),
 IPOPT (tol 1e-8, up to 300 iterations, same warm start) tries the problem as well: the last
@@ -41,7 +41,7 @@ from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.problem import OptProblem
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.solvers.base import make_solver
 from nehmo_core.planning.solvers.ipopt import IpoptSolver
 from nehmo_core.planning.solvers.sqp import SolveResult, solve_sqp
@@ -57,7 +57,9 @@ class _Both:
         self.settings = PlannerSettings()
         self.default = make_solver(self.settings)
         self.ipopt = IpoptSolver(tol=1e-8, max_iter=300)
-        self.authors = IpoptSolver(self.settings.ipopt_tol, self.settings.ipopt_max_iter)
+        self.authors = IpoptSolver(
+            self.settings.solver.ipopt_tol, self.settings.solver.ipopt_max_iter
+        )
         self.record = False
         self.rows: list[dict[str, Any]] = []
 
@@ -78,11 +80,11 @@ class _Both:
             python = solve_sqp(
                 problem,
                 y_start,
-                d.sqp_tol,
-                d.sqp_max_iter,
+                d.solver.sqp_tol,
+                d.solver.sqp_max_iter,
                 np.inf,
                 hessian,
-                screen=d.sqp_screen,
+                screen=d.solver.sqp_screen,
                 native=False,
             )
             ipopt_found = None
@@ -129,7 +131,7 @@ def _cell(
     models = [model, *far_models(ModelRegistry(), cell, model)]  # every pair constrained
     # plan() gets no peer_bounds here, so every peer would count as silent; in cells of NeHMO
     # arms the silent-path watch never acts, so it is off
-    watch_off = PlannerSettings(silent_lookahead=0.0)
+    watch_off = PlannerSettings().override({"silent_watch.lookahead": 0.0})
     planners = {
         a: NehmoPlanner(cell, a, models, watch_off, solver=solvers[a]) for a in cell.arm_ids
     }
@@ -235,8 +237,8 @@ def main() -> None:
     model = PairValueModel.from_value_function(vf, "bench_ur5_ur5_bcsym")
     defaults = PlannerSettings()
     report = {
-        "sqp_tol": defaults.sqp_tol,
-        "sqp_screen": defaults.sqp_screen,
+        "sqp_tol": defaults.solver.sqp_tol,
+        "sqp_screen": defaults.solver.sqp_screen,
         "cells": [
             _cell(cell_name, arm, model, args.scenarios, args.steps) for cell_name, arm, _ in CASES
         ],

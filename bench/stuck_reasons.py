@@ -26,7 +26,7 @@ from pathlib import Path
 from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.eval.metrics import goal_distance
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SETUPS = {
@@ -36,7 +36,7 @@ SETUPS = {
     "ur5_kinova_challenging": ("table_IV_ur5_kinova_challenging.json", "nehmo/nehmo"),
 }
 NEAR, FAR_FROM_GOAL = 0.2, 0.1  # [m], [rad]
-FLOOR = PlannerSettings().settled_epsilon  # [m]
+FLOOR = PlannerSettings().hold.settled_epsilon  # [m]
 REASONS = (
     f"goals closer than {FLOOR * 100:g} cm",
     "blocked by a settled peer",
@@ -57,7 +57,7 @@ def reason(path: str, world: CellWorld | None) -> tuple[str, CellWorld]:
     w.set_configuration(final)
     dist = {frozenset(p): w.distance(*p) for p in pairs}
     err = {a: goal_distance(final[a], log.goals[a], log.cell, a, "l2") for a in ids}
-    settled = {a for a in ids if err[a] < PlannerSettings().hold_tolerance}
+    settled = {a for a in ids if err[a] < PlannerSettings().hold.tolerance}
     stalled = [a for a in ids if err[a] > FAR_FROM_GOAL]
     for a in stalled:
         if any(b in settled and dist[frozenset((a, b))] < NEAR for b in ids if b != a):

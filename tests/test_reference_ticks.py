@@ -33,7 +33,7 @@ from nehmo_core.eval.planners import build_planners
 from nehmo_core.eval.setups import get_setup, parse_row
 from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.sim.scenarios import ScenarioSet, generate_scenario_set
 
 DATA = Path(__file__).parent / "data" / "reference_ticks"
@@ -48,7 +48,7 @@ CASES = [
 
 
 def _settings(preset: str) -> PlannerSettings:
-    return PlannerSettings.preset(preset, deadline=3600.0)
+    return PlannerSettings.preset(preset, {"opt.deadline": 3600.0})
 
 
 def _planners(setup_name: str, row: str, preset: str, scenario: Any) -> dict[str, Any]:

@@ -155,6 +155,7 @@ def test_ros_nodes_use_planners_through_their_interface() -> None:
 PLANNING_MAX_LINES = 300
 #: planning's layers, bottom first: a module may import its own layer's package and those below
 PLANNING_LAYERS = {
+    "settings": 0,
     "numerics": 0,
     "models": 1,
     "opt": 2,

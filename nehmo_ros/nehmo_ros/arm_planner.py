@@ -24,15 +24,14 @@ stale peers end in the fail-safe or a hold, and every tick's status says which.
 Parameters (validated at start; a bad one stops the node with one line naming it, the rule and
 the value): ``arm_id`` (required), ``cell`` (required: shipped name or YAML path), ``planner``
 (nehmo | nehmo_paper | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless), ``model``
-(shipped | synthetic | path), ``rate`` [Hz], ``t_plan``, ``t_safe`` [s], ``epsilon`` [m],
-``u_max``, ``d_max`` [rad/s], ``solver`` (sqp | ipopt), ``self_clearance`` (self-collision
-dampers in Opt and the fail-safe; false: the paper's Opt), ``escape`` (stall escape and yield,
-see :class:`nehmo_core.planning.nehmo.NehmoPlanner`; false: the paper's Opt), ``deadline`` [s]
-(0: 75 % of the period), ``peer_timeout`` [s], ``stale_policy`` (hold | fail_safe: what a stale
-or untrusted peer triggers), ``jump_margin`` [rad] (slack of the test that flags joint states
-moving faster than ``d_max``; ``.inf``: off), ``allow_unmodelled`` (accept peers in reach that
-no pair model covers: they are then not constrained; default false: an error),
-``fault_injection`` (tests only, default '' = off: :mod:`nehmo_ros.fault_injection`).
+(shipped | synthetic | path), ``rate`` [Hz], ``peer_timeout`` [s], ``stale_policy`` (hold |
+fail_safe: what a stale or untrusted peer triggers), ``jump_margin`` [rad] (slack of the test
+that flags joint states moving faster than ``opt.d_max``; ``.inf``: off), ``allow_unmodelled``
+(accept peers in reach that no pair model covers: they are then not constrained; default false:
+an error), ``fault_injection`` (tests only, default '' = off: :mod:`nehmo_ros.fault_injection`),
+and every planner setting by its dotted name (``opt.t_plan``, ``hold.bound``,
+``fail_safe.slack``, ...: :func:`planner_params`, ``docs/settings.md``); ``opt.deadline`` [s]
+is 0 by default: 75 % of the period, and ``opt.tick`` comes from ``rate``.
 
 Faults are reported, never fatal: rejected or jumping joint states, stale peers, solver
 exceptions and missed deadlines each log a WARN line (at most one per cause every 2 s) and
@@ -49,7 +48,6 @@ import math
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import fields
 from typing import Any
 
 import rclpy
@@ -69,13 +67,14 @@ from nehmo_core.logs.topics import (
     speed_bound_topic,
     status_topic,
 )
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import RENAMED, PlannerSettings
 from nehmo_ros.control import ArmController, ControlSettings, Decision
 from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
 from nehmo_ros.node_support import (
     Param,
     declare_parameters,
     load_cell_parameter,
+    refuse_renamed,
     require_text,
     run_main,
 )
@@ -86,8 +85,8 @@ LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: The diagnostics convention (diagnostic_aggregator, rqt_robot_monitor, Foxglove).
 DIAGNOSTICS_TOPIC = "/diagnostics"
 
-_PLANNER, _CONTROL = PlannerSettings(), ControlSettings()
-PARAMS: dict[str, Param] = {
+_CONTROL = ControlSettings()
+NODE_PARAMS: dict[str, Param] = {
     "arm_id": Param("", "id of the arm this node commands (one of the cell's arms)"),
     "cell": Param("", "shipped cell name (dual_ur5, ...) or a cell YAML path"),
     "planner": Param(
@@ -96,53 +95,6 @@ PARAMS: dict[str, Param] = {
     ),
     "model": Param("shipped", "shipped | synthetic | [KIND=]PATH,... (run dir or .safetensors)"),
     "rate": Param(_CONTROL.rate, "[Hz] command rate", 1e-3, 1000.0),
-    "t_plan": Param(_PLANNER.t_plan, "[s] planning horizon (command hold time in Opt)"),
-    "t_safe": Param(_PLANNER.t_safe, "[s] time-to-go at which V must stay >= epsilon"),
-    "epsilon": Param(_PLANNER.epsilon, "[m] safety margin on V (the floor when certified)"),
-    "certified_epsilon": Param(
-        _PLANNER.certified_epsilon, "raise epsilon to the models' certified level at t_safe"
-    ),
-    "settled_epsilon": Param(
-        _PLANNER.settled_epsilon,
-        "[m] floor of the margin against a peer that announced a speed bound",
-        1e-6,
-        1.0,
-    ),
-    "u_max": Param(_PLANNER.u_max, "[rad/s] own joint speed bound"),
-    "d_max": Param(_PLANNER.d_max, "[rad/s] peers' joint speed bound (worst case)"),
-    "solver": Param(_PLANNER.solver, "sqp | ipopt"),
-    "self_clearance": Param(_PLANNER.self_clearance, "self-collision rows in Opt and fail-safe"),
-    "escape": Param(_PLANNER.escape, "stall escape and yield at the goal"),
-    "fail_safe": Param(_PLANNER.fail_safe, "single | maximin: the fail-safe against one or all"),
-    "fail_safe_slack": Param(
-        _PLANNER.fail_safe_slack, "[m] maximin: how far the worst pair may drop for the next", 0, 1
-    ),
-    "fail_safe_harm": Param(
-        _PLANNER.fail_safe_harm, "[m/s] maximin: fastest the arm may lower a critical V", 0, 100
-    ),
-    "exact_guard": Param(
-        _PLANNER.exact_guard,
-        "[m] exact clearance to holding peers, threat distance when holding (0: off)",
-        0,
-        1,
-    ),
-    "hold_bound": Param(
-        _PLANNER.hold_bound, "speed bound announced at the goal, share of u_max (1: none)", 0.0, 1.0
-    ),
-    "hold_tolerance": Param(
-        _PLANNER.hold_tolerance, "[rad] goal distance within which hold_bound is announced"
-    ),
-    "hold_release": Param(
-        _PLANNER.hold_release, "[rad] goal distance beyond which a holding arm withdraws its bound"
-    ),
-    "silent_lookahead": Param(
-        _PLANNER.silent_lookahead,
-        "[s] how far a silent peer's observed velocity is extrapolated (0: off)",
-    ),
-    "silent_clearance": Param(
-        _PLANNER.silent_clearance, "[m] V along a silent peer's path that the arm steps away from"
-    ),
-    "deadline": Param(0.0, "[s] solve budget; 0: 75 % of the period", 0.0, 10.0),
     "peer_timeout": Param(
         _CONTROL.peer_timeout, "[s] a joint state older than this is stale", 0.0, 60.0
     ),
@@ -150,11 +102,40 @@ PARAMS: dict[str, Param] = {
         _CONTROL.stale_policy, "hold | fail_safe: what a stale or untrusted peer triggers"
     ),
     "jump_margin": Param(
-        _CONTROL.jump_margin, "[rad] slack of the test flagging states faster than d_max"
+        _CONTROL.jump_margin, "[rad] slack of the test flagging states faster than opt.d_max"
     ),
     "allow_unmodelled": Param(False, "accept peers in reach that no pair model covers"),
     "fault_injection": Param("", "tests only: raise | solver_raise | hang | slow; '' = off"),
 }
+"""The node's own parameters; the planner's settings follow (:func:`planner_params`)."""
+FROM_RATE = ("opt.tick",)
+"""Planner settings the node sets from ``rate`` instead of a parameter."""
+DEADLINE = Param(0.0, "[s] solve budget within a period; 0: 75 % of the period", 0.0, 10.0)
+
+
+def planner_params() -> dict[str, Param]:
+    """One node parameter per planner setting, named ``group.field`` (``fail_safe.slack``),
+    with the description, unit and range of its settings group."""
+    defaults = PlannerSettings().flat()
+    out: dict[str, Param] = {}
+    for name, _, _, rule in PlannerSettings.specs():
+        if name in FROM_RATE:
+            continue
+        if name == "opt.deadline":
+            out[name] = DEADLINE
+            continue
+        default = defaults[name]
+        text = f"[{rule.unit}] {rule.doc}" if rule.unit else rule.doc
+        low, high = rule.low, rule.high
+        if isinstance(default, tuple):
+            default, low, high = [float(v) for v in default], None, None
+        elif low is None or high is None or not math.isfinite(high):
+            low = high = None
+        out[name] = Param(default, text, low, high)
+    return out
+
+
+PARAMS: dict[str, Param] = {**NODE_PARAMS, **planner_params()}
 #: Seconds between two WARN lines of one cause.
 WARN_EVERY = 2.0
 #: History of the command and status publishers (reliable, keep last): 2 s at 25 Hz, so a
@@ -163,6 +144,13 @@ HISTORY = 50
 #: Ticks between two statuses on ``/diagnostics`` while all is OK (1 Hz at 25 Hz); a WARN or
 #: ERROR status goes out at once.
 DIAGNOSTICS_EVERY = 25
+
+
+def _typed(value: object) -> object:
+    """A parameter's value as its setting takes it (arrays as tuples)."""
+    if isinstance(value, str | bool | int | float):
+        return value
+    return tuple(float(v) for v in value)  # type: ignore[attr-defined]
 
 
 def _level(decision: Decision) -> int:
@@ -185,6 +173,7 @@ class ArmPlannerNode(Node):
 
     def __init__(self) -> None:
         super().__init__("arm_planner")
+        refuse_renamed(self, RENAMED)
         p = declare_parameters(self, PARAMS)
         self.cell = load_cell_parameter(p["cell"])
         arm_id = require_text("arm_id", p["arm_id"], f"one of the cell's arms {self.cell.arm_ids}")
@@ -196,22 +185,23 @@ class ArmPlannerNode(Node):
         rate = float(p["rate"])
         if not (math.isfinite(rate) and 0 < rate <= 1000):
             raise InvalidValueError("rate", "must lie in (0, 1000] Hz", rate)
-        deadline = float(p["deadline"]) or 0.75 / rate
+        deadline = float(p["opt.deadline"]) or 0.75 / rate
+        if not deadline < 1.0 / rate:
+            raise InvalidValueError(
+                "opt.deadline", f"must be < 1/rate = {1.0 / rate:.4g} s (0: 75 %)", deadline
+            )
+        given = {k: _typed(p[k]) for k in planner_params() if k != "opt.deadline"}
+        settings = PlannerSettings().override(
+            {**given, "opt.deadline": deadline, "opt.tick": 1.0 / rate}
+        )
         control = ControlSettings(
             rate=rate,
-            deadline=deadline,
             peer_timeout=float(p["peer_timeout"]),
             stale_policy=p["stale_policy"],
-            u_max=float(p["u_max"]),
-            d_max=float(p["d_max"]),
             jump_margin=float(p["jump_margin"]),
+            opt=settings.opt,
         )
         fault = parse_fault(str(p["fault_injection"]))
-        # every node parameter named like a planner setting sets it, converted to its type
-        own = ("deadline", "tick")  # from the rate
-        named = [f.name for f in fields(PlannerSettings) if f.name in p and f.name not in own]
-        given = {k: type(getattr(_PLANNER, k))(p[k]) for k in named}
-        settings = PlannerSettings(**given, deadline=deadline, tick=1.0 / rate)
         planner = build_planner(
             p["planner"], self.cell, arm_id, p["model"], settings, bool(p["allow_unmodelled"])
         )

@@ -50,13 +50,14 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.planning.opt.interface import Planner, Telemetry
 from nehmo_core.planning.opt.peer_bounds import PeerBounds
+from nehmo_core.planning.settings import OptSettings
 from nehmo_core.robots.model import Cell
 from nehmo_ros.solve_worker import Decision, Observation, SolveWorker, zeros
 from nehmo_ros.state_buffer import StateBuffer, order_joints
@@ -75,31 +76,26 @@ STALE_POLICIES = ("fail_safe", "hold")
 
 @dataclass(frozen=True)
 class ControlSettings:
-    """Rate [Hz], solve budget [s], staleness timeout [s] and what a stale peer triggers."""
+    """Rate [Hz], staleness timeout [s], what a stale peer triggers, and the jump test.
+
+    The speed bounds come from the planner's ``opt`` settings (one source): every command is
+    clipped to ±``opt.u_max``, and a peer state moving faster than ``opt.d_max`` (plus
+    ``jump_margin``) is a jump. The solve budget is the planner's ``opt.deadline``.
+    """
 
     rate: float = 25.0
-    deadline: float = 0.03  # budget of one solve inside a period (given to the planner too)
     peer_timeout: float = 0.25  # a joint state older than this is stale
     stale_policy: str = "hold"
-    u_max: float = 0.5  # [rad/s] every command is clipped to ±u_max
-    d_max: float = 0.5  # [rad/s] peers' speed bound: a peer state moving faster is a jump
     jump_margin: float = 0.1  # [rad] slack of the jump test (inf: no jump test)
+    opt: OptSettings = field(default_factory=OptSettings)  # the planner's: u_max, d_max
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.rate) and 0 < self.rate <= 1000):
             raise InvalidValueError("rate", "must lie in (0, 1000] Hz", self.rate)
-        if not 0 < self.deadline < 1.0 / self.rate:
-            raise InvalidValueError(
-                "deadline", f"must lie in (0, 1/rate = {1.0 / self.rate:.4g}) s", self.deadline
-            )
         if not self.peer_timeout > 0:
             raise InvalidValueError("peer_timeout", "must be > 0 [s]", self.peer_timeout)
         if self.stale_policy not in STALE_POLICIES:
             raise UnknownNameError("stale_policy", self.stale_policy, STALE_POLICIES)
-        if not (math.isfinite(self.u_max) and self.u_max > 0):
-            raise InvalidValueError("u_max", "must be a finite number > 0 [rad/s]", self.u_max)
-        if not (math.isfinite(self.d_max) and self.d_max > 0):
-            raise InvalidValueError("d_max", "must be a finite number > 0 [rad/s]", self.d_max)
         if not self.jump_margin > 0:
             raise InvalidValueError("jump_margin", "must be > 0 [rad] (inf: off)", self.jump_margin)
 
@@ -136,7 +132,7 @@ class ArmController:
         self.settings = settings or ControlSettings()
         self.peer_ids = tuple(a for a in cell.arm_ids if a != arm_id)
         s = self.settings
-        speed = {a: s.u_max if a == arm_id else s.d_max for a in cell.arm_ids}
+        speed = {a: s.opt.u_max if a == arm_id else s.opt.d_max for a in cell.arm_ids}
         self.states = StateBuffer(cell, speed, s.jump_margin)
         self.counters = Counters()
         self._goal: np.ndarray | None = None
@@ -149,7 +145,7 @@ class ArmController:
         self._fallback: tuple[int, np.ndarray] | None = None  # (tick, fail-safe) of the latest job
         self._finished: dict[int, float] = {}  # tick → solve time of jobs finished lately
         self._worker = SolveWorker(self._solve, name=f"solve_{arm_id}")
-        self._bounds = PeerBounds(s.d_max)
+        self._bounds = PeerBounds(s.opt.d_max)
         self._bounds_lock = threading.Lock()
 
     def telemetry(self, decision: Decision) -> Telemetry:
@@ -308,7 +304,8 @@ class ArmController:
         velocity = np.asarray(velocity, dtype=np.float64)
         if not np.all(np.isfinite(velocity)):
             return None
-        return np.clip(velocity, -self.settings.u_max, self.settings.u_max)
+        u_max = self.settings.opt.u_max
+        return np.clip(velocity, -u_max, u_max)
 
     def _count(self, decision: Decision) -> None:
         c = self.counters

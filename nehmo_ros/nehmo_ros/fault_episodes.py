@@ -48,7 +48,7 @@ from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, reached
 from nehmo_core.eval.scenario_sets import naive_collides
 from nehmo_core.planning.opt.interface import Planner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.cell_sim import CellSimulator
@@ -172,7 +172,7 @@ def run_rows(
         scenarios = generate_scenario_set(
             cell, seed, count, naive_collides(cell, es, sim), max_candidates=40 * count
         )
-        ps = PlannerSettings(deadline=1.0)
+        ps = PlannerSettings().override({"opt.deadline": 1.0})
         out: dict[str, Any] = {
             "cell": cell.name,
             "seed": seed,

@@ -117,6 +117,19 @@ def _override(node: Node, name: str, fallback: Any) -> Any:
     return overrides[name].value if name in overrides else fallback
 
 
+def refuse_renamed(node: Node, renamed: Mapping[str, str]) -> None:
+    """An error for a parameter given under a name that was replaced (``hold_bound`` is now
+    ``hold.bound``): rclpy would ignore it silently, as it ignores any undeclared name."""
+    given = sorted(set(getattr(node, "_parameter_overrides", {})) & set(renamed))
+    if given:
+        old = given[0]
+        raise InvalidValueError(
+            old,
+            f"is now `{renamed[old]}` (settings are named group.field)",
+            _override(node, old, None),
+        )
+
+
 def require_text(name: str, value: str, hint: str) -> str:
     """``value`` if it is a non-empty string, else an error naming ``name`` and ``hint``."""
     if not isinstance(value, str) or not value.strip():

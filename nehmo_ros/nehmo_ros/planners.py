@@ -25,7 +25,7 @@ from nehmo_core.planning.factory import DECENTRALIZED, make_planner
 from nehmo_core.planning.models.registry import OPT_KINDS, model_registry
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.interface import Planner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
 __all__ = ["build_planner", "warm_up"]

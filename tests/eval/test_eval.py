@@ -390,7 +390,7 @@ def test_nehmo_wrap_kind_wraps_the_goal_and_uses_the_bc_sym_model() -> None:
     plain = make_planner("nehmo", cell, "ur5_0", [model])
     wrapped = make_planner("nehmo_wrap", cell, "ur5_0", [model])
     assert isinstance(wrapped, NehmoPlanner) and isinstance(plain, NehmoPlanner)
-    assert wrapped.settings.wrap_goal and not plain.settings.wrap_goal
+    assert wrapped.settings.opt.wrap_goal and not plain.settings.opt.wrap_goal
     assert OPT_KINDS["nehmo_wrap"] == OPT_KINDS["nehmo"] == "bc+sym"
     # a goal 2π − 0.2 away on the base joint: the wrapped cost turns the short way
     q = np.zeros(6)
@@ -399,22 +399,6 @@ def test_nehmo_wrap_kind_wraps_the_goal_and_uses_the_bc_sym_model() -> None:
     q[0] = -np.pi + 0.1
     far = {"ur5_1": np.array([3.0, -1.6, 1.5, -1.6, -1.5, 0.0])}
     assert wrapped.plan(q, far, goal).velocity[0] < 0 < plain.plan(q, far, goal).velocity[0]
-
-
-def test_planner_setting_overrides_are_typed_and_checked() -> None:
-    from nehmo_core.eval.cli import parse_settings
-
-    assert parse_settings(["t_plan=0.08", "escape=false", "stall_ticks=20"]) == {
-        "t_plan": 0.08,
-        "escape": False,
-        "stall_ticks": 20,
-    }
-    with pytest.raises(InvalidValueError, match=r"`--planner-setting`.*t_safe"):
-        parse_settings(["tplan=0.08"])  # unknown key: the valid ones are listed
-    with pytest.raises(InvalidValueError, match="escape must be true or false"):
-        parse_settings(["escape=maybe"])
-    with pytest.raises(InvalidValueError, match="stall_ticks must be an integer"):
-        parse_settings(["stall_ticks=1.5"])
 
 
 def test_one_line_summaries_give_the_papers_cr_and_self_collisions_apart() -> None:

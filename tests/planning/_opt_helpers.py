@@ -16,12 +16,14 @@ from nehmo_core.planning.models.synthetic import random_value_function
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.problem import OptProblem
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenarios import sample_configuration
 
 CELL = load_cell("dual_ur5")
-UNHURRIED = PlannerSettings(deadline=3600.0)  # statuses never depend on the machine's load
+UNHURRIED = PlannerSettings().override(
+    {"opt.deadline": 3600.0}
+)  # statuses never depend on the machine's load
 OWN, PEER = "ur5_0", "ur5_1"
 
 

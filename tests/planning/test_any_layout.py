@@ -162,7 +162,7 @@ def test_irregular_cell_plans_with_the_conditioned_model_for_every_pair() -> Non
         assert "ur5_ur5_any" in models[mapping.model_index].name
     q = {a.arm_id: np.zeros(6) for a in cell.arms}
     result = planner.plan(q["ur5_0"], {k: v for k, v in q.items() if k != "ur5_0"}, np.full(6, 0.3))
-    assert np.all(np.abs(result.velocity) <= planner.settings.u_max + 1e-9)
+    assert np.all(np.abs(result.velocity) <= planner.settings.opt.u_max + 1e-9)
 
 
 def test_a_pair_closer_than_the_range_is_reported_not_ignored() -> None:

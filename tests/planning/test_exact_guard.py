@@ -10,7 +10,7 @@ from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.stages.exact_guard import closer_than, guard_step
 from nehmo_core.robots import load_cell
 
@@ -73,26 +73,31 @@ def test_the_guard_keeps_the_floor_where_the_learned_rows_would_not(
     world: CellWorld, models: list
 ) -> None:
     # a settled floor of 1 mm lets the learned rows run the arm into the held peer's geometry
-    loose = PlannerSettings(settled_epsilon=1e-3, exact_guard=0.0, escape=False)
+    loose = PlannerSettings().override(
+        {"hold.settled_epsilon": 1e-3, "exact_guard.gap": 0.0, "escape.enabled": False}
+    )
     unguarded, _ = _closest(world, loose, models)
     assert unguarded < FLOOR - 0.01
-    guarded, shortened = _closest(world, loose.replace(exact_guard=FLOOR), models)
+    guarded, shortened = _closest(world, loose.override({"exact_guard.gap": FLOOR}), models)
     assert shortened > 0
     assert guarded >= FLOOR - 0.005  # discrete checks of a straight step
 
 
 def test_the_guard_leaves_steps_alone_without_a_held_peer_or_when_off(world: CellWorld) -> None:
-    settings = PlannerSettings(exact_guard=FLOOR)
+    settings = PlannerSettings().override({"exact_guard.gap": FLOOR})
     q, u = np.zeros(6), np.full(6, 0.5)
     assert guard_step(CELL, OWN, q, u, {}, settings) == 1.0
-    assert guard_step(CELL, OWN, q, u, {PEER: np.zeros(6)}, settings.replace(exact_guard=0)) == 1
-    with pytest.raises(InvalidValueError, match=r"exact_guard.*>= 0"):
-        PlannerSettings(exact_guard=-0.01)
+    assert (
+        guard_step(CELL, OWN, q, u, {PEER: np.zeros(6)}, settings.override({"exact_guard.gap": 0}))
+        == 1
+    )
+    with pytest.raises(InvalidValueError, match=r"exact_guard\.gap.*\[0, 1\]"):
+        PlannerSettings().override({"exact_guard.gap": -0.01})
 
 
 def test_a_step_that_opens_the_gap_passes_even_below_the_floor(world: CellWorld) -> None:
     peer, goal, start = _goal_inside_peer(world)
-    settings = PlannerSettings(exact_guard=FLOOR)
+    settings = PlannerSettings().override({"exact_guard.gap": FLOOR})
     toward, away = (goal - start), (start - goal)
     step = 0.5 / np.abs(toward).max()  # full speed on the largest joint
     assert guard_step(CELL, OWN, goal, away * step, {PEER: peer}, settings) == 1.0
@@ -116,7 +121,9 @@ def test_a_holding_arm_withdraws_from_a_full_speed_peer_within_the_floor(
         assert not closer_than(CELL, OWN, q, {PEER: peer}, 0.004)
         bounds = []
         for guard in (0.0, FLOOR):
-            settings = PlannerSettings(settled_epsilon=1e-3, exact_guard=guard, deadline=3600.0)
+            settings = PlannerSettings().override(
+                {"hold.settled_epsilon": 1e-3, "exact_guard.gap": guard, "opt.deadline": 3600.0}
+            )
             planner = NehmoPlanner(CELL, OWN, models, settings)
             # at its goal, beside a peer that announces full speed
             bounds.append(planner.plan(q, {PEER: peer}, q, {PEER: 1.0}).telemetry.speed_bound)

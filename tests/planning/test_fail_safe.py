@@ -18,7 +18,7 @@ from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.planners import build_planners
 from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.stages.fail_safe import MaximinFailSafe, maximin_command, worst_case_rates
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
@@ -174,15 +174,15 @@ def test_with_a_harm_limit_no_pair_is_lowered_faster_and_the_rest_is_maximin(
 def test_a_negative_harm_is_rejected() -> None:
     with pytest.raises(InvalidValueError, match="harm"):
         maximin_command(np.eye(2, 6), np.ones((2, 6)), U, D, np.zeros(2), TAU, harm=-0.1)
-    with pytest.raises(InvalidValueError, match="fail_safe_harm"):
-        PlannerSettings(fail_safe_harm=-0.001)
+    with pytest.raises(InvalidValueError, match=r"fail_safe\.harm"):
+        PlannerSettings().override({"fail_safe.harm": -0.001})
 
 
 def test_a_negative_slack_is_rejected() -> None:
     with pytest.raises(InvalidValueError, match="slack"):
         maximin_command(np.eye(2, 6), np.ones((2, 6)), U, D, np.zeros(2), TAU, slack=-0.1)
-    with pytest.raises(InvalidValueError, match="fail_safe_slack"):
-        PlannerSettings(fail_safe_slack=-0.001)
+    with pytest.raises(InvalidValueError, match=r"fail_safe\.slack"):
+        PlannerSettings().override({"fail_safe.slack": -0.001})
 
 
 def test_with_one_pair_it_is_the_papers_command() -> None:
@@ -201,7 +201,7 @@ def test_the_critical_set_holds_a_member_until_twice_the_band() -> None:
 
 def test_an_unknown_fail_safe_is_rejected() -> None:
     with pytest.raises(UnknownNameError, match="fail_safe"):
-        PlannerSettings(fail_safe="both")
+        PlannerSettings().override({"fail_safe.kind": "both"})
 
 
 # ------------------------------------------------------------------------- closed loop
@@ -214,7 +214,10 @@ def planners() -> dict[str, NehmoPlanner]:
     models = ModelRegistry().models_for("nehmo", CELL)
     return {
         kind: NehmoPlanner(
-            CELL, "ur5_1", models, PlannerSettings(fail_safe=kind, self_clearance=False)
+            CELL,
+            "ur5_1",
+            models,
+            PlannerSettings().override({"fail_safe.kind": kind, "self_clearance.enabled": False}),
         )
         for kind in ("single", "maximin")
     }
@@ -254,7 +257,7 @@ def _episode(planner: NehmoPlanner, q0: dict, ticks: int = 25, dt: float = 0.04)
     for _ in range(ticks):
         q = sim.positions()
         now = planner.current(q["ur5_1"], {p: q[p] for p in PEERS})
-        u = planner.stage("fail_safe").command(now, planner.settings.u_max)
+        u = planner.stage("fail_safe").command(now, planner.settings.opt.u_max)
         commands = {"ur5_1": u}
         for i, peer in enumerate(now.ids):
             commands[peer] = -D * np.sign(now.grads[i][6:])
@@ -286,8 +289,8 @@ SANDWICHED = Path(__file__).parents[1] / "data" / "sandwiched"
 EARLIER = {
     "five_ur5_seed34_0076": None,  # plain maximin, no longer in contact since settled arms
     # tell announcing peers from silent ones
-    "five_ur5_seed35_0061": {"fail_safe_slack": 0.0, "fail_safe_harm": 100.0},  # plain maximin
-    "five_ur5_seed41_0045": {"fail_safe_harm": 100.0},  # lexicographic, no limit on the trade
+    "five_ur5_seed35_0061": {"fail_safe.slack": 0.0, "fail_safe.harm": 100.0},  # plain maximin
+    "five_ur5_seed41_0045": {"fail_safe.harm": 100.0},  # lexicographic, no limit on the trade
 }
 
 
@@ -307,7 +310,7 @@ def test_five_arms_where_an_earlier_fail_safe_collided_stay_apart(name: str) -> 
     for kind, changes in variants.items():
         if changes is None:
             continue
-        unhurried = PlannerSettings(deadline=3600.0, **changes)
+        unhurried = PlannerSettings().override({"opt.deadline": 3600.0, **changes})
         planners = build_planners(
             cell, {a: "nehmo" for a in cell.arm_ids}, scenario, 0.04, ModelRegistry(), unhurried
         )

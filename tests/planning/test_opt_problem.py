@@ -15,7 +15,7 @@ from nehmo_core.planning.baselines.naive import NaivePlanner
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.problem import worst_case_disturbance
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.solvers.sqp import solve_sqp
 from nehmo_core.planning.stages.self_clearance import SelfClearanceRows
 
@@ -87,7 +87,7 @@ def test_a_nan_row_at_the_naive_step_is_not_taken_for_a_safe_one(model, in_c) ->
 def test_constraint_holds_at_the_solution_against_an_adversarial_peer(
     model: PairValueModel, value_function
 ) -> None:
-    planner = NehmoPlanner(CELL, OWN, [model], PlannerSettings(deadline=1.0))
+    planner = NehmoPlanner(CELL, OWN, [model], PlannerSettings().override({"opt.deadline": 1.0}))
     solved = 0
     for q1, q2, goal in _near_contact(model, 3, 12):
         for _ in range(5):  # the peer plays its worst case every step

@@ -13,7 +13,7 @@ from _opt_helpers import CELL, OWN, PEER, UNHURRIED, _near_contact
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.problem import OptProblem
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.solvers.base import SqpSolver
 from nehmo_core.planning.solvers.sqp import SolveResult
 from nehmo_core.robots import load_cell
@@ -91,7 +91,9 @@ def test_a_solve_starts_at_the_last_solution_or_after_a_fail_safe_at_the_naive_s
 
 
 def test_fail_safe_fires_on_a_missed_deadline(model, value_function) -> None:
-    planner = NehmoPlanner(CELL, OWN, [model], PlannerSettings(deadline=0.04), solver=_Slow())
+    planner = NehmoPlanner(
+        CELL, OWN, [model], PlannerSettings().override({"opt.deadline": 0.04}), solver=_Slow()
+    )
     q1, q2, goal = _near_contact(model, 7, 1)[0]
     result = planner.plan(q1, {PEER: q2}, goal)
     assert result.telemetry.fail_safe and result.telemetry.status == "timeout"
@@ -103,7 +105,7 @@ def test_fail_safe_fires_on_a_missed_deadline(model, value_function) -> None:
 def test_fail_safe_deadband_stills_only_the_joints_that_barely_change_v(
     model, value_function
 ) -> None:
-    settings = PlannerSettings(fail_safe_deadband=0.3)
+    settings = PlannerSettings().override({"fail_safe.deadband": 0.3})
     planner = NehmoPlanner(CELL, OWN, [model], settings, solver=_Failing())
     q1, q2, goal = _near_contact(model, 6, 1)[0]
     result = planner.plan(q1, {PEER: q2}, goal)
@@ -115,8 +117,8 @@ def test_fail_safe_deadband_stills_only_the_joints_that_barely_change_v(
     np.testing.assert_array_equal(result.velocity[~dead], 0.5 * np.sign(g[~dead]))
     # the first-order rate of V under the deadband fail-safe stays positive (it still evades)
     assert float(g @ result.velocity) > 0.0
-    with pytest.raises(InvalidValueError, match="fail_safe_deadband"):
-        PlannerSettings(fail_safe_deadband=1.0)
+    with pytest.raises(InvalidValueError, match=r"fail_safe\.deadband"):
+        PlannerSettings().override({"fail_safe.deadband": 1.0})
 
 
 def test_fail_safe_picks_the_most_critical_of_several_peers(model) -> None:

@@ -14,7 +14,7 @@ from _opt_helpers import CELL, OWN, PEER, UNHURRIED, _near_contact
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.planning.baselines.naive import NaivePlanner, TrajectoryTracker, retime
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.solvers.base import SqpSolver
 
 # the module-scoped fixtures of the Opt tests, bound here under their names for pytest
@@ -24,39 +24,39 @@ model = _opt_helpers.model
 
 def test_sqp_screen_setting_is_validated() -> None:
     with pytest.raises(InvalidValueError, match="sqp_screen"):
-        PlannerSettings(sqp_screen=0.0)
-    assert SqpSolver().screen == PlannerSettings().sqp_screen
-    assert SqpSolver().tol == PlannerSettings().sqp_tol
+        PlannerSettings().override({"solver.sqp_screen": 0.0})
+    assert SqpSolver().screen == PlannerSettings().solver.sqp_screen
+    assert SqpSolver().tol == PlannerSettings().solver.sqp_tol
 
 
 @pytest.mark.parametrize(
     ("changes", "parameter"),
     [
-        ({"epsilon": -0.1}, "epsilon"),
-        ({"t_plan": 0.0}, "t_plan"),
-        ({"t_plan": 0.4}, "t_plan"),
-        ({"u_max": 0.0}, "u_max"),
-        ({"d_max": -1.0}, "d_max"),
-        ({"deadline": 0.0}, "deadline"),
-        ({"sqp_max_iter": 0}, "sqp_max_iter"),
-        ({"reach_margin": -1.0}, "reach_margin"),
-        ({"stall_ticks": 0}, "stall_ticks"),
-        ({"escape_ticks": 0}, "escape_ticks"),
-        ({"stall_progress": -0.1}, "stall_progress"),
+        ({"opt.epsilon": -0.1}, "opt.epsilon"),
+        ({"opt.t_plan": 0.0}, "opt.t_plan"),
+        ({"opt.t_plan": 0.4}, "opt.t_plan"),
+        ({"opt.u_max": 0.0}, "opt.u_max"),
+        ({"opt.d_max": -1.0}, "opt.d_max"),
+        ({"opt.deadline": 0.0}, "opt.deadline"),
+        ({"solver.sqp_max_iter": 0}, "solver.sqp_max_iter"),
+        ({"opt.reach_margin": -1.0}, "opt.reach_margin"),
+        ({"escape.stall_ticks": 0}, "escape.stall_ticks"),
+        ({"escape.escape_ticks": 0}, "escape.escape_ticks"),
+        ({"escape.stall_progress": -0.1}, "escape.stall_progress"),
     ],
 )
 def test_bad_settings_are_rejected_naming_the_parameter(changes, parameter) -> None:
     with pytest.raises(InvalidValueError, match=f"`{parameter}`"):
-        PlannerSettings(**changes)
+        PlannerSettings().override(changes)
 
 
 def test_unknown_choices_list_the_valid_ones(model) -> None:
     with pytest.raises(UnknownNameError, match="ipopt"):
-        PlannerSettings(solver="snopt")
+        PlannerSettings().override({"solver.name": "snopt"})
     with pytest.raises(UnknownNameError, match="paper"):
         PlannerSettings.preset("fast")
-    with pytest.raises(InvalidValueError, match="`t_safe`"):
-        NehmoPlanner(CELL, OWN, [model], PlannerSettings(t_safe=0.7))
+    with pytest.raises(InvalidValueError, match=r"`opt\.t_safe`"):
+        NehmoPlanner(CELL, OWN, [model], PlannerSettings().override({"opt.t_safe": 0.7}))
     with pytest.raises(InvalidValueError, match="`q_self`"):
         NehmoPlanner(CELL, OWN, [model], UNHURRIED).plan(
             np.zeros(5), {PEER: np.zeros(6)}, np.zeros(6)
@@ -102,29 +102,45 @@ def test_batched_joint_vectors_are_rejected_naming_the_parameter(model, entry, p
 @pytest.mark.parametrize(
     ("changes", "parameter", "rule"),
     [
-        ({"self_safety": -0.01}, "self_safety", "must be >= 0"),
-        ({"self_safety": math.nan}, "self_safety", "must be >= 0"),
-        ({"self_influence": 0.004}, "self_influence", "must be > self_safety (0.005)"),
-        ({"escape_seed": -1}, "escape_seed", "must be >= 0"),
-        ({"escape_seed": 1.5}, "escape_seed", "must be an int >= 0"),
-        ({"sqp_max_iter": 2.5}, "sqp_max_iter", "must be an int >= 1"),
-        ({"sqp_max_iter": math.nan}, "sqp_max_iter", "must be an int >= 1"),
-        ({"sqp_max_iter": True}, "sqp_max_iter", "must be an int >= 1"),
-        ({"ipopt_max_iter": 30.0}, "ipopt_max_iter", "must be an int >= 1"),
-        ({"stall_ticks": 2.5}, "stall_ticks", "must be an int >= 1"),
-        ({"stall_ticks": math.nan}, "stall_ticks", "must be an int >= 1"),
-        ({"escape_ticks": 2.5}, "escape_ticks", "must be an int >= 1"),
-        ({"yield_ticks": math.inf}, "yield_ticks", "must be an int >= 1"),
+        ({"self_clearance.safety": -0.01}, "self_clearance.safety", "must be >= 0"),
+        ({"self_clearance.safety": math.nan}, "self_clearance.safety", "must be a number"),
+        (
+            {"self_clearance.influence": 0.004},
+            "self_clearance.influence",
+            "must be > self_clearance.safety (0.005)",
+        ),
+        ({"escape.seed": -1}, "escape.seed", "must be >= 0"),
+        ({"escape.seed": 1.5}, "escape.seed", "must be an int >= 0"),
+        ({"solver.sqp_max_iter": 2.5}, "solver.sqp_max_iter", "must be an int >= 1"),
+        ({"solver.sqp_max_iter": math.nan}, "solver.sqp_max_iter", "must be an int >= 1"),
+        ({"solver.sqp_max_iter": True}, "solver.sqp_max_iter", "must be an int >= 1"),
+        ({"solver.ipopt_max_iter": 30.0}, "solver.ipopt_max_iter", "must be an int >= 1"),
+        ({"escape.stall_ticks": 2.5}, "escape.stall_ticks", "must be an int >= 1"),
+        ({"escape.stall_ticks": math.nan}, "escape.stall_ticks", "must be an int >= 1"),
+        ({"escape.escape_ticks": 2.5}, "escape.escape_ticks", "must be an int >= 1"),
+        ({"escape.yield_ticks": math.inf}, "escape.yield_ticks", "must be an int >= 1"),
     ],
 )
 def test_bad_counts_and_self_clearance_settings_name_their_own_rule(
     changes, parameter, rule
 ) -> None:
     with pytest.raises(InvalidValueError, match=re.escape(f"`{parameter}` {rule}; got")):
-        PlannerSettings(**changes)
+        PlannerSettings().override(changes)
 
 
 def test_whole_counts_and_seeds_are_accepted() -> None:
-    s = PlannerSettings(sqp_max_iter=1, stall_ticks=3, escape_seed=0, self_safety=0.0)
-    assert (s.sqp_max_iter, s.stall_ticks, s.escape_seed, s.self_safety) == (1, 3, 0, 0.0)
-    assert PlannerSettings(escape_seed=2**40).escape_seed == 2**40
+    s = PlannerSettings().override(
+        {
+            "solver.sqp_max_iter": 1,
+            "escape.stall_ticks": 3,
+            "escape.seed": 0,
+            "self_clearance.safety": 0.0,
+        }
+    )
+    assert (
+        s.solver.sqp_max_iter,
+        s.escape.stall_ticks,
+        s.escape.seed,
+        s.self_clearance.safety,
+    ) == (1, 3, 0, 0.0)
+    assert PlannerSettings().override({"escape.seed": 2**40}).escape.seed == 2**40

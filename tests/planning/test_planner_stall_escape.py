@@ -11,7 +11,7 @@ from _opt_helpers import CELL, OWN, PEER, _near_contact
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.problem import OptProblem
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.solvers.base import SqpSolver
 from nehmo_core.planning.solvers.sqp import SolveResult
 from nehmo_core.sim.scenarios import sample_configuration
@@ -40,9 +40,15 @@ def _closed_loop(planner: NehmoPlanner, q1, q2, goal, ticks: int) -> list:
 
 def test_stall_escape_moves_along_the_level_set_and_keeps_the_constraint(model) -> None:
     q1, q2, goal = _stalled_case(model)
-    settings = PlannerSettings(deadline=1.0, stall_ticks=5, escape_ticks=10)
+    settings = PlannerSettings().override(
+        {"opt.deadline": 1.0, "escape.stall_ticks": 5, "escape.escape_ticks": 10}
+    )
     stuck = _closed_loop(
-        NehmoPlanner(CELL, OWN, [model], settings.replace(escape=False)), q1, q2, goal, 60
+        NehmoPlanner(CELL, OWN, [model], settings.override({"escape.enabled": False})),
+        q1,
+        q2,
+        goal,
+        60,
     )
     tail = np.array([q for q, _ in stuck[-20:]])
     assert np.abs(tail - tail[-1]).max() < 1e-3  # without the escape the arm stops for good
@@ -68,9 +74,13 @@ def test_stall_escape_moves_along_the_level_set_and_keeps_the_constraint(model) 
 
 
 def test_escape_length_doubles_until_the_goal_error_reaches_a_new_low(model) -> None:
-    settings = PlannerSettings(stall_ticks=3, escape_ticks=4, stall_progress=0.1)
+    settings = PlannerSettings().override(
+        {"escape.stall_ticks": 3, "escape.escape_ticks": 4, "escape.stall_progress": 0.1}
+    )
     planner = NehmoPlanner(CELL, OWN, [model], settings)
-    assert settings.t_plan * settings.u_max == pytest.approx(0.05)  # progress: > 0.005 rad/call
+    assert settings.opt.t_plan * settings.opt.u_max == pytest.approx(
+        0.05
+    )  # progress: > 0.005 rad/call
 
     def feed(errors: list[float]) -> list[int]:
         left = []
@@ -94,7 +104,9 @@ def test_escape_length_doubles_until_the_goal_error_reaches_a_new_low(model) -> 
 def test_an_arm_held_at_its_goal_against_a_peer_yields_then_returns(model) -> None:
     rng = np.random.default_rng(7)
     robot = CELL.arm(OWN).robot
-    settings = PlannerSettings(deadline=1.0, stall_ticks=5, yield_ticks=8)
+    settings = PlannerSettings().override(
+        {"opt.deadline": 1.0, "escape.stall_ticks": 5, "escape.yield_ticks": 8}
+    )
     planner = NehmoPlanner(CELL, OWN, [model], settings)
     while True:  # the own arm at its goal, the peer pressing it (V row within stall_margin)
         q1, q2 = sample_configuration(robot, rng), sample_configuration(robot, rng)
@@ -111,12 +123,12 @@ def test_an_arm_held_at_its_goal_against_a_peer_yields_then_returns(model) -> No
 
 
 def test_paper_preset_and_kind_have_no_escape(model) -> None:
-    assert PlannerSettings().escape
-    assert not PlannerSettings.preset("paper").escape
+    assert PlannerSettings().escape.enabled
+    assert not PlannerSettings.preset("paper").escape.enabled
     from nehmo_core.planning.factory import make_planner
 
     planner = make_planner("nehmo_paper", CELL, OWN, [model])
-    assert isinstance(planner, NehmoPlanner) and not planner.settings.escape
+    assert isinstance(planner, NehmoPlanner) and not planner.settings.escape.enabled
 
 
 class _Switchable:
@@ -146,7 +158,9 @@ def _into_an_escape(planner: NehmoPlanner, q1, q2, goal) -> np.ndarray:
 
 def test_a_new_goal_ends_an_escape_and_is_followed_at_once(model) -> None:
     q1, q2, goal = _stalled_case(model)
-    settings = PlannerSettings(deadline=1.0, stall_ticks=5, escape_ticks=10)
+    settings = PlannerSettings().override(
+        {"opt.deadline": 1.0, "escape.stall_ticks": 5, "escape.escape_ticks": 10}
+    )
     planner = NehmoPlanner(CELL, OWN, [model], settings)
     # the same goal (equal values, another object) keeps a running escape going
     q = _into_an_escape(planner, q1, q2, goal)
@@ -170,7 +184,9 @@ def test_a_new_goal_ends_an_escape_and_is_followed_at_once(model) -> None:
 def test_fail_safe_ticks_during_an_escape_are_not_reported_as_escaping(model) -> None:
     q1, q2, goal = _stalled_case(model)
     solver = _Switchable()
-    settings = PlannerSettings(deadline=1.0, stall_ticks=5, escape_ticks=10)
+    settings = PlannerSettings().override(
+        {"opt.deadline": 1.0, "escape.stall_ticks": 5, "escape.escape_ticks": 10}
+    )
     planner = NehmoPlanner(CELL, OWN, [model], settings, solver=solver)
     q = _into_an_escape(planner, q1, q2, goal)
     solver.fail = True

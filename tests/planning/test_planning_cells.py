@@ -30,7 +30,7 @@ from nehmo_core.planning.models.synthetic import random_value_function
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.interface import PlanResult, Telemetry, WithoutValues
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell, load_robot
 from nehmo_core.robots.loader import cell_from_dict
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
@@ -226,7 +226,9 @@ def test_nehmo_on_both_arms_of_the_ur5_kinova_cell() -> None:
         scenario = sample_scenario(cell, scenario_rng(0, 0), sim.world)
         naive = {a: NaivePlanner(cell, a) for a in cell.arm_ids}
         assert run_episode(cell, scenario, naive, settings, simulator=sim).outcome == "collision"
-        unhurried = PlannerSettings(deadline=3600.0)  # no solve is cut short on a loaded machine
+        unhurried = PlannerSettings().override(
+            {"opt.deadline": 3600.0}
+        )  # no solve is cut short on a loaded machine
         planners = build_planners(
             cell, kinds, scenario, 1 / settings.rate, ModelRegistry(), unhurried
         )
@@ -244,7 +246,7 @@ def test_nehmo_on_both_arms_of_the_ur5_kinova_cell() -> None:
     assert np.all(np.isfinite(values))
     # the first plan saw the start state through kinova_ur5: V(t_plan, (q_kinova, q_ur5))
     x0 = np.concatenate([scenario.start["kinova_0"], scenario.start["ur5_0"]])
-    v0, _ = own_model.evaluate(kinova.settings.t_plan, x0[None, :])
+    v0, _ = own_model.evaluate(kinova.settings.opt.t_plan, x0[None, :])
     assert values[0] == pytest.approx(float(v0[0]), abs=1e-9)
     assert values.min() > 0.0  # it kept a positive margin on the way
 
@@ -275,7 +277,7 @@ def test_naive_and_reckless_go_straight_and_clamp() -> None:
         planner = make_planner(kind, cell, "kinova_0")
         result = planner.plan(q, {"ur5_0": np.zeros(6)}, goal)
         np.testing.assert_allclose(result.velocity, [0.5, -0.2, 0.0, 0.5, -0.5, 0.1])
-    wrapped = NaivePlanner(cell, "ur5_0", PlannerSettings(wrap_goal=True))
+    wrapped = NaivePlanner(cell, "ur5_0", PlannerSettings().override({"opt.wrap_goal": True}))
     assert wrapped.plan(np.zeros(6), {}, np.array([6.0, 0, 0, 0, 0, 0])).velocity[0] < 0
 
 

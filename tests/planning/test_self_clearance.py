@@ -8,7 +8,7 @@ import pytest
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings, SelfClearanceSettings
 from nehmo_core.planning.stages import self_clearance
 from nehmo_core.planning.stages.self_clearance import SelfClearance, project_step
 from nehmo_core.robots.loader import load_robot
@@ -19,7 +19,7 @@ ROBOTS = ("ur5", "kinova_gen3_6dof")
 
 @pytest.fixture(scope="module", params=ROBOTS)
 def clearance(request: pytest.FixtureRequest) -> SelfClearance:
-    sc = SelfClearance(load_robot(request.param), influence=0.3)
+    sc = SelfClearance(load_robot(request.param), SelfClearanceSettings(influence=0.3))
     yield sc
     sc.close()
 
@@ -145,11 +145,9 @@ def test_damped_commands_keep_a_folding_arm_off_itself(robot_name: str) -> None:
     """Full speed on every joint toward folding: with the rows the arm never touches itself."""
     robot = load_robot(robot_name)
     settings = PlannerSettings()
-    clearance = SelfClearance(
-        robot, settings.self_influence, settings.self_safety, settings.self_gain
-    )
+    clearance = SelfClearance(robot, settings.self_clearance)
     world = CellWorld(Cell("one", (ArmSpec("arm", robot, Pose()),)))
-    dt, t_plan, u_max = 0.01, settings.t_plan, settings.u_max
+    dt, t_plan, u_max = 0.01, settings.opt.t_plan, settings.opt.u_max
     rng = np.random.default_rng(11)
     undamped_hits = 0
     try:
@@ -182,19 +180,21 @@ def test_damped_commands_keep_a_folding_arm_off_itself(robot_name: str) -> None:
 
 
 def test_settings_reject_bad_self_clearance_values() -> None:
-    with pytest.raises(InvalidValueError, match="self_influence"):
-        PlannerSettings(self_influence=0.01, self_safety=0.02)
-    with pytest.raises(InvalidValueError, match="self_gain"):
-        PlannerSettings(self_gain=0.0)
-    assert PlannerSettings.preset("paper").self_clearance is False
-    assert PlannerSettings().self_clearance is True
+    with pytest.raises(InvalidValueError, match=r"self_clearance\.influence"):
+        PlannerSettings().override(
+            {"self_clearance.influence": 0.01, "self_clearance.safety": 0.02}
+        )
+    with pytest.raises(InvalidValueError, match=r"self_clearance\.gain"):
+        PlannerSettings().override({"self_clearance.gain": 0.0})
+    assert PlannerSettings.preset("paper").self_clearance.enabled is False
+    assert PlannerSettings().self_clearance.enabled is True
 
 
 @pytest.mark.parametrize("robot_name", ROBOTS)
 def test_the_lipschitz_bounds_hold_between_nearby_configurations(robot_name: str) -> None:
     """|d(q) − d(q')| ≤ Σ_j bound_j·|q_j − q'_j| for every pair, on random nearby pairs of
     configurations (distances read with a 2 m influence, so every pair has one)."""
-    far = SelfClearance(load_robot(robot_name), influence=2.0)
+    far = SelfClearance(load_robot(robot_name), SelfClearanceSettings(influence=2.0))
     rng, checked = np.random.default_rng(11), 0
     try:
         for _ in range(150):

@@ -13,8 +13,8 @@ from nehmo_core.errors import InvalidValueError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.planners import build_planners
 from nehmo_core.planning.models.registry import ModelRegistry
-from nehmo_core.planning.opt.settings import PAPER_OPT, PlannerSettings
-from nehmo_core.planning.stages.silent_peers import APPROACH, SilentPathWatch
+from nehmo_core.planning.settings import PAPER_OPT, PlannerSettings, SilentWatchSettings
+from nehmo_core.planning.stages.silent_peers import SilentPathWatch
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import load_scenario_set
 
@@ -80,20 +80,24 @@ def test_an_approaching_peer_turns_the_target_up_the_value_at_its_path() -> None
     assert _target(watch, own, peer, [0.2, 0.0]) is None
     assert _target(watch, own, peer, [0.0, 0.2]) is None  # V grows along the path
     assert _target(watch, own, np.array([2.0, 0.0]), [-0.2, 0.0]) is None  # stays above 0.2
-    # an approach smaller than APPROACH is not one
-    slow = APPROACH / 2.0 / 2.0  # V falls by APPROACH / 2 over the lookahead
+    # an approach smaller than silent_watch.approach is not one
+    approach = SilentWatchSettings().approach
+    slow = approach / 2.0 / 2.0  # V falls by approach / 2 over the lookahead
     assert _target(SilentPathWatch(2.0, 0.5, 0.04, 0.5), own, peer, [-slow, 0.0]) is None
     assert _target(SilentPathWatch(0.0, 0.2, 0.04, 0.5), own, peer, [-0.2, 0.0]) is None  # off
 
 
-@pytest.mark.parametrize("name", ["silent_lookahead", "silent_clearance", "tick"])
+@pytest.mark.parametrize(
+    "name",
+    ["silent_watch.lookahead", "silent_watch.clearance", "silent_watch.approach", "opt.tick"],
+)
 def test_bad_watch_settings_are_rejected_by_name(name: str) -> None:
-    with pytest.raises(InvalidValueError, match=name):
-        PlannerSettings(**{name: -1.0})
+    with pytest.raises(InvalidValueError, match=f"`{name}`"):
+        PlannerSettings().override({name: -1.0})
 
 
 def test_the_papers_opt_does_not_watch() -> None:
-    assert PlannerSettings().replace(**PAPER_OPT).silent_lookahead == 0.0
+    assert PlannerSettings().override(PAPER_OPT).silent_watch.lookahead == 0.0
 
 
 @pytest.mark.parametrize("index", [0, 1, 2])
@@ -107,11 +111,13 @@ def test_stepping_out_of_a_reckless_peers_path_avoids_collisions(index: int) -> 
     scenario = scenarios.scenarios[index]
     kinds = {"ur5_0": "nehmo", "kinova_0": "reckless"}
     outcomes = {}
-    for lookahead in (0.0, PlannerSettings().silent_lookahead):
-        unhurried = PlannerSettings(deadline=3600.0, silent_lookahead=lookahead)
+    for lookahead in (0.0, PlannerSettings().silent_watch.lookahead):
+        unhurried = PlannerSettings().override(
+            {"opt.deadline": 3600.0, "silent_watch.lookahead": lookahead}
+        )
         planners = build_planners(cell, kinds, scenario, 0.04, ModelRegistry(), unhurried)
         result = run_episode(cell, scenario, planners, EpisodeSettings(time_limit=30.0))
         between = [c for c in result.collisions if c.arm_a != c.arm_b]
         outcomes[lookahead] = (result.outcome, bool(between))
     assert outcomes[0.0] == ("collision", True), "the scenario no longer reproduces the collision"
-    assert outcomes[PlannerSettings().silent_lookahead] == ("success", False)
+    assert outcomes[PlannerSettings().silent_watch.lookahead] == ("success", False)

@@ -11,7 +11,7 @@ from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.peer_bounds import PeerBounds
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
 
@@ -49,8 +49,8 @@ def test_a_peer_faster_than_announced_is_planned_at_full_speed_until_it_reannoun
 def test_a_bound_outside_zero_one_is_rejected_with_its_name() -> None:
     with pytest.raises(InvalidValueError, match=r"speed bound.*\[0, 1\].*1\.5"):
         PeerBounds(D).announce("b", 1.5)
-    with pytest.raises(InvalidValueError, match="hold_bound"):
-        PlannerSettings(hold_bound=-0.1)
+    with pytest.raises(InvalidValueError, match=r"hold\.bound"):
+        PlannerSettings().override({"hold.bound": -0.1})
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,9 @@ def models() -> list:
 
 
 def test_an_arm_at_its_goal_announces_and_keeps_its_bound(models: list) -> None:
-    planner = NehmoPlanner(CELL, OWN, models, PlannerSettings(hold_bound=0.2, deadline=3600.0))
+    planner = NehmoPlanner(
+        CELL, OWN, models, PlannerSettings().override({"hold.bound": 0.2, "opt.deadline": 3600.0})
+    )
     q_own = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])  # both arms turned away: V ≈ 0.44 m
     far = {PEER: np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])}
     goal = q_own + 0.02
@@ -78,7 +80,9 @@ def test_an_arm_at_its_goal_announces_and_keeps_its_bound(models: list) -> None:
 
 
 def test_an_arm_pushed_off_its_goal_keeps_its_bound_until_hold_release(models: list) -> None:
-    settings = PlannerSettings(hold_bound=0.2, hold_release=0.3, deadline=3600.0)
+    settings = PlannerSettings().override(
+        {"hold.bound": 0.2, "hold.release": 0.3, "opt.deadline": 3600.0}
+    )
     planner = NehmoPlanner(CELL, OWN, models, settings)
     goal = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
     far = {PEER: goal.copy()}  # both arms turned away: no peer presses
@@ -95,8 +99,8 @@ def test_an_arm_pushed_off_its_goal_keeps_its_bound_until_hold_release(models: l
 
 
 def test_a_release_inside_the_hold_tolerance_is_rejected() -> None:
-    with pytest.raises(InvalidValueError, match=r"hold_release.*hold_tolerance.*0\.02"):
-        PlannerSettings(hold_release=0.02)
+    with pytest.raises(InvalidValueError, match=r"hold\.release.*hold\.tolerance.*0\.02"):
+        PlannerSettings().override({"hold.release": 0.02})
 
 
 def _pushing_states(planner: NehmoPlanner, bound: float, count: int) -> list[tuple]:
@@ -146,7 +150,10 @@ def test_planning_against_an_announced_bound_is_safe_and_less_conservative(model
     # ε fixed at 0.05 m: the pushing states below are drawn for that margin (V ≥ 0.08 m at full
     # speed), which a certified ε above 0.08 m would make infeasible from the start
     planner = NehmoPlanner(
-        CELL, OWN, models, PlannerSettings(certified_epsilon=False, deadline=3600.0)
+        CELL,
+        OWN,
+        models,
+        PlannerSettings().override({"margins.certified": False, "opt.deadline": 3600.0}),
     )
     bound = 0.2
     told, untold = [], []
@@ -167,7 +174,7 @@ def test_a_settled_arm_withdraws_its_bound_from_a_peer_that_breaks_the_slow_game
     """A peer that announces nothing and comes closer than a NeHMO peer planning against the
     bound would (``V(k·t_plan) < ε``) is fled from at full speed after the withdrawal; the
     same state from a peer that keeps a bound of its own is no reason to withdraw."""
-    settings = PlannerSettings(hold_bound=0.2, deadline=3600.0)
+    settings = PlannerSettings().override({"hold.bound": 0.2, "opt.deadline": 3600.0})
     q_own = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
     far = {PEER: np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])}
     close = {PEER: np.array([0.0, -1.2, 1.0, 0.0, 0.0, 0.0])}  # turned toward the arm: V < ε
@@ -190,7 +197,7 @@ def test_a_peer_that_announces_full_speed_is_held_to_half_its_settled_margin(
     settled arm's bound and keeps ``V(k·t_safe)`` at its settled margin, so a state between half
     that margin and ε is no threat from it, though it is from a silent peer; below half the
     margin it is a threat from either."""
-    settings = PlannerSettings(hold_bound=0.2, deadline=3600.0)
+    settings = PlannerSettings().override({"hold.bound": 0.2, "opt.deadline": 3600.0})
     q_own = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
     far = {PEER: np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])}
     near = {PEER: np.array([0.0, -1.2, 1.0, 0.0, 0.0, 0.0])}
@@ -203,7 +210,7 @@ def test_a_peer_that_announces_full_speed_is_held_to_half_its_settled_margin(
         return float(probe.evaluate(q_own, peers, [PEER], slow).values[0])
 
     # the states fall where the test means them to
-    assert 0.5 * margin < value(near) < probe.settings.epsilon
+    assert 0.5 * margin < value(near) < probe.settings.opt.epsilon
     assert value(closer) < 0.5 * margin
     for peers, told, expected in (
         (near, {PEER: 1.0}, 0.2),  # a participant within its margin's tolerance: stay

@@ -16,7 +16,7 @@ from nehmo_core.hjr.networks import NetworkSettings
 from nehmo_core.planning.models.synthetic import random_value_function
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.solvers import native, sqp
 from nehmo_core.planning.solvers.base import SqpSolver, make_solver
 from nehmo_core.planning.solvers.sqp import SolveResult, solve_sqp
@@ -157,7 +157,7 @@ def test_a_planner_loads_its_models_c_handles_before_its_first_tick(model) -> No
     NehmoPlanner(CELL, OWN, [fresh])
     assert native.loop()._models[fresh] is not None
     on_ipopt = replace(model, _calls={})
-    NehmoPlanner(CELL, OWN, [on_ipopt], PlannerSettings(solver="ipopt"))
+    NehmoPlanner(CELL, OWN, [on_ipopt], PlannerSettings().override({"solver.name": "ipopt"}))
     assert on_ipopt not in native.loop()._models
 
 
@@ -181,4 +181,6 @@ def test_c_loop_reports_a_passed_deadline(model) -> None:
     late = solve_sqp(problem, np.zeros(6), deadline=time.perf_counter() - 1.0)
     assert late.status == "timeout"
     assert late.iterations == 1
-    assert make_solver(PlannerSettings(sqp_native=False)) == SqpSolver(native=False)
+    assert make_solver(PlannerSettings().override({"solver.sqp_native": False})) == SqpSolver(
+        native=False
+    )

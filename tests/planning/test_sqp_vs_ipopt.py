@@ -9,7 +9,7 @@ from _opt_helpers import CELL, OWN, PEER, UNHURRIED, _multi_peer_problems, _near
 
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.solvers.ipopt import IpoptSolver
 from nehmo_core.planning.solvers.sqp import solve_sqp
 
@@ -34,9 +34,9 @@ def test_sqp_returns_the_ipopt_solution(model: PairValueModel) -> None:
         assert abs(problem.cost(fast.y) - problem.cost(ref.y)) <= 1e-6 * (1.0 + problem.cost(ref.y))
         assert fast.constraint.min() >= -1e-9
         # the default tolerance (1e-4 rad on the last step) lands within it of the solution
-        default = solve_sqp(problem, np.zeros(6), tol=PlannerSettings().sqp_tol)
+        default = solve_sqp(problem, np.zeros(6), tol=PlannerSettings().solver.sqp_tol)
         assert default.status == "optimal"
-        np.testing.assert_allclose(default.y, fast.y, atol=PlannerSettings().sqp_tol)
+        np.testing.assert_allclose(default.y, fast.y, atol=PlannerSettings().solver.sqp_tol)
         assert default.constraint.min() >= -1e-7
         compared += 1
     assert compared >= 5

@@ -17,7 +17,7 @@ CELL = load_cell("dual_ur5")
 NAMES = list(CELL.arm("ur5_0").robot.joint_names)
 # The tests tag observations with large steps of the own first joint: no jump test here (the
 # jump tests of test_control_peer_states.py turn it on).
-SETTINGS = ControlSettings(rate=25.0, deadline=0.03, peer_timeout=0.25, jump_margin=math.inf)
+SETTINGS = ControlSettings(rate=25.0, peer_timeout=0.25, jump_margin=math.inf)
 FAIL_SAFE = np.full(6, 0.5)
 TIMEOUT = 30.0  # [s] longest wait for an event of another thread (never reached when passing)
 

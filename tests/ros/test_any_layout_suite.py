@@ -15,7 +15,7 @@ from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.eval.metrics import EpisodeResult, goal_distance
 from nehmo_core.eval.planners import build_planners
 from nehmo_core.planning.models.registry import ModelRegistry
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import draw_scenario_set, load_scenario_set, save_scenario_set
 from nehmo_core.sim.scenarios import Scenario
@@ -54,7 +54,9 @@ def test_the_scenario_file_names_the_cell_file(scenario_file: Path) -> None:
 def test_batch_runner_plans_every_pair_and_stays_collision_free(scenario_file: Path) -> None:
     scenario = load_scenario_set(scenario_file).scenarios[0]
     kinds = dict.fromkeys(CELL.arm_ids, "nehmo")
-    unhurried = PlannerSettings(deadline=3600.0)  # no solve is cut short on a loaded machine
+    unhurried = PlannerSettings().override(
+        {"opt.deadline": 3600.0}
+    )  # no solve is cut short on a loaded machine
     planners = build_planners(CELL, kinds, scenario, 0.04, ModelRegistry(), unhurried)
     for planner in planners.values():
         assert len(planner.pairs) == 2 and not planner.peers_unmodelled  # type: ignore[attr-defined]

@@ -22,7 +22,11 @@ def test_goal_outside_joint_limits_is_rejected() -> None:
 
 @pytest.mark.parametrize(
     ("changes", "name"),
-    [({"rate": 0.0}, "rate"), ({"deadline": 0.05}, "deadline"), ({"peer_timeout": -1}, "peer")],
+    [
+        ({"rate": 0.0}, "rate"),
+        ({"jump_margin": 0.0}, "jump_margin"),
+        ({"peer_timeout": -1}, "peer"),
+    ],
 )
 def test_bad_control_settings_name_the_parameter(changes: dict[str, float], name: str) -> None:
     with pytest.raises(InvalidValueError, match=f"`{name}"):

@@ -139,11 +139,13 @@ def test_fault_injection_is_off_by_default() -> None:
 
 
 def test_solver_raise_ends_in_the_planners_own_fail_safe() -> None:
-    from nehmo_core.planning.opt.settings import PlannerSettings
+    from nehmo_core.planning.settings import PlannerSettings
     from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
     from nehmo_ros.planners import build_planner
 
-    inner = build_planner("nehmo", CELL, "ur5_0", "synthetic", PlannerSettings(deadline=1.0))
+    inner = build_planner(
+        "nehmo", CELL, "ur5_0", "synthetic", PlannerSettings().override({"opt.deadline": 1.0})
+    )
     spec = parse_fault("solver_raise@1")
     assert spec is not None
     planner = FaultInjectingPlanner(inner, spec)

@@ -26,7 +26,7 @@ from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.metrics import EpisodeResult
 from nehmo_core.eval.planners import build_planners
 from nehmo_core.planning.models.registry import ModelRegistry, parse_value_models
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import save_scenario_set
 from nehmo_core.sim.scenarios import generate_scenario_set
@@ -93,7 +93,9 @@ def batch(scenario_file: Path) -> EpisodeResult:
     scenario = load_scenario_set(scenario_file).scenarios[INDEX]
     registry = ModelRegistry(parse_value_models(["synthetic"]))
     kinds = dict.fromkeys(CELL.arm_ids, "nehmo")
-    unhurried = PlannerSettings(deadline=3600.0)  # the reference: no solve cut short by load
+    unhurried = PlannerSettings().override(
+        {"opt.deadline": 3600.0}
+    )  # the reference: no solve cut short by load
     planners = build_planners(CELL, kinds, scenario, 0.04, registry, unhurried)
     return run_episode(CELL, scenario, planners, EpisodeSettings(), kinds=kinds)
 

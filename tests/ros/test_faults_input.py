@@ -169,7 +169,7 @@ def test_entry_points_print_one_clear_line(results: dict, name: str) -> None:
 )
 def test_bad_model_files_name_the_model_parameter(root: Path, model: str, expected: str) -> None:
     from nehmo_core.errors import NehmoError
-    from nehmo_core.planning.opt.settings import PlannerSettings
+    from nehmo_core.planning.settings import PlannerSettings
     from nehmo_ros.planners import build_planner
 
     cell = load_cell("dual_ur5")
@@ -203,22 +203,26 @@ def test_bad_scenario_files_stop_the_bridge_with_the_reason(
     ("changes", "expected"),
     [
         ({"jump_margin": -1.0}, "`jump_margin` must be > 0"),
-        ({"d_max": math.nan}, "`d_max` must be a finite number"),
-        ({"u_max": math.inf}, "`u_max` must be a finite number"),
+        ({"opt": {"d_max": math.nan}}, "`opt.d_max` must be a number"),
+        ({"opt": {"u_max": math.inf}}, "`opt.u_max` must lie in (0, inf)"),
     ],
 )
 def test_new_control_parameters_are_checked(changes: dict, expected: str) -> None:
     from nehmo_core.errors import InvalidValueError
+    from nehmo_core.planning.settings import OptSettings
     from nehmo_ros.control import ControlSettings
 
     with pytest.raises(InvalidValueError) as info:
-        ControlSettings(**changes)
+        if "opt" in changes:  # the speed bounds are the planner's: checked by its settings
+            ControlSettings(opt=OptSettings(**changes["opt"]))
+        else:
+            ControlSettings(**changes)
     assert expected in str(info.value)
 
 
 def test_loading_a_model_never_runs_pickled_code(root: Path, results: dict) -> None:
     from nehmo_core.errors import NehmoError
-    from nehmo_core.planning.opt.settings import PlannerSettings
+    from nehmo_core.planning.settings import PlannerSettings
     from nehmo_ros.planners import build_planner
 
     assert results["pickle_model"][0] == 2  # the node, given a pickle

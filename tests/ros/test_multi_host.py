@@ -31,7 +31,7 @@ import pytest
 from _ros_testutil import DOMAIN_ID, child_env
 
 from nehmo_core.eval.metrics import EpisodeResult, evaluate_log
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set
 from nehmo_core.sim.scenarios import Scenario, generate_scenario_set, goal_error
@@ -320,7 +320,7 @@ def _assert_travelled(result: EpisodeResult, scenario: Scenario) -> None:
     """What success does not imply: every arm's path is at least as long as the way it made to
     its goal, no arm covered it faster than ``u_max`` per joint allows, and the episode took at
     least as long as the farthest joint needs at that speed."""
-    u_max = PlannerSettings().u_max
+    u_max = PlannerSettings().opt.u_max
     assert result.metadata["success"]["norm"] == "l2"  # final_errors are L2 distances
     soonest = 0.0
     for a in CELL.arm_ids:

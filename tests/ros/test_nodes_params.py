@@ -13,8 +13,13 @@ CASES = [
     ("nehmo_ros.arm_planner", ["cell:=dual_ur5", "arm_id:=ur5_9"], "`arm_id` must name an arm"),
     (
         "nehmo_ros.arm_planner",
-        ["cell:=dual_ur5", "arm_id:=ur5_0", "planner:=naive", "epsilon:=-0.1"],
-        "`epsilon` must be > 0; got -0.1",
+        ["cell:=dual_ur5", "arm_id:=ur5_0", "planner:=naive", "opt.epsilon:=-0.1"],
+        "`opt.epsilon` must be > 0; got -0.1",
+    ),
+    (
+        "nehmo_ros.arm_planner",
+        ["cell:=dual_ur5", "arm_id:=ur5_0", "hold_bound:=1.0"],
+        "`hold_bound` is now `hold.bound`",
     ),
     (
         "nehmo_ros.arm_planner",
@@ -54,6 +59,7 @@ CASES = [
         "no_arm_id",
         "unknown_arm",
         "epsilon",
+        "renamed",
         "planner",
         "rate_type",
         "rate_range",

@@ -32,7 +32,7 @@ from nehmo_core.eval.setups import OPT_KINDS, get_setup, is_centralized, parse_r
 from nehmo_core.logs import remove_bag
 from nehmo_core.planning.models.registry import ModelRegistry, ValueModelSource
 from nehmo_core.planning.opt.interface import Planner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenarios import Scenario, ScenarioSet

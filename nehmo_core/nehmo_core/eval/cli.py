@@ -29,7 +29,7 @@ from nehmo_core.eval.report import markdown_table, setup_summary, write_summary
 from nehmo_core.eval.scenario_sets import scenario_set_for
 from nehmo_core.eval.setups import SETUPS, get_setup, parse_row, row_slug
 from nehmo_core.planning.models.registry import parse_value_models, snapshot_value_models
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings, parse_assignments
 from nehmo_core.sim.scenario_files import load_scenario_set
 from nehmo_core.sim.scenarios import ScenarioSet
 
@@ -94,41 +94,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--planner-setting",
         action="append",
         default=[],
-        metavar="KEY=VALUE",
-        help="override a PlannerSettings field for every Opt row, e.g. t_plan=0.08; repeatable",
+        metavar="GROUP.FIELD=VALUE",
+        help="set a planner setting for every Opt row, e.g. opt.t_plan=0.08 or hold.bound=1 "
+        "(names: docs/settings.md); repeatable",
     )
     parser.add_argument("--render", action="store_true", help="render each row's first episode")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-
-
-def parse_settings(items: list[str]) -> dict[str, object]:
-    """``["t_plan=0.08", "escape=false"]`` → PlannerSettings overrides, typed by the field."""
-    fields = PlannerSettings.__dataclass_fields__
-    defaults = PlannerSettings()
-    out: dict[str, object] = {}
-    for item in items:
-        key, sep, text = item.partition("=")
-        key = key.strip()
-        if not sep or key not in fields:
-            raise InvalidValueError(
-                "--planner-setting", f"must be KEY=VALUE with KEY one of {sorted(fields)}", item
-            )
-        default = getattr(defaults, key)
-        kind = float if default is None else type(default)  # optional settings are numbers
-        text = text.strip()
-        try:
-            if default is None and text.lower() == "none":
-                out[key] = None
-            elif kind is bool:
-                if text.lower() not in ("true", "false", "1", "0"):
-                    raise ValueError(text)
-                out[key] = text.lower() in ("true", "1")
-            else:
-                out[key] = kind(text)
-        except ValueError:
-            what = {bool: "true or false", int: "an integer", float: "a number"}.get(kind, "text")
-            raise InvalidValueError("--planner-setting", f"{key} must be {what}", text) from None
-    return out
 
 
 def _scenarios(args: argparse.Namespace) -> ScenarioSet:
@@ -204,17 +175,17 @@ def run(args: argparse.Namespace) -> int:
         cell = get_setup(args.setup).load_cell()
         for row in rows:  # fail before any work on a bad row
             parse_row(row, cell)
-    planner_settings = PlannerSettings()
+    changes: dict[str, object] = {}
     if args.deadline is not None:
-        planner_settings = planner_settings.replace(deadline=args.deadline)
+        changes["opt.deadline"] = args.deadline
     if args.fail_safe_deadband is not None:
-        planner_settings = planner_settings.replace(fail_safe_deadband=args.fail_safe_deadband)
+        changes["fail_safe.deadband"] = args.fail_safe_deadband
     if args.no_self_clearance:
-        planner_settings = planner_settings.replace(self_clearance=False)
+        changes["self_clearance.enabled"] = False
     if args.no_escape:
-        planner_settings = planner_settings.replace(escape=False)
-    if args.planner_setting:
-        planner_settings = planner_settings.replace(**parse_settings(args.planner_setting))
+        changes["escape.enabled"] = False
+    changes.update(parse_assignments(args.planner_setting))
+    planner_settings = PlannerSettings().override(changes)
     if args.tasks is not None:
         return _run_tasks(args, rows, planner_settings)
     config = BatchConfig(

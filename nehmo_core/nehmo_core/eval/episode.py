@@ -203,7 +203,7 @@ def _loop(
     pending: dict[str, np.ndarray] = {}
     # announced speed bounds: heard one tick after they are made, checked against the motion
     nehmo = [p for p in planners.values() if isinstance(p, NehmoPlanner)]
-    bounds = PeerBounds(max((p.settings.d_max for p in nehmo), default=1.0))
+    bounds = PeerBounds(max((p.settings.opt.d_max for p in nehmo), default=1.0))
     outcome, ticks, collisions = "stuck", 0, []
     if reached(cell, sim.positions(), scenario, s):
         outcome = "success"

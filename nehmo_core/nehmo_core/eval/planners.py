@@ -16,7 +16,7 @@ from nehmo_core.planning.factory import centralized_trackers, make_planner
 from nehmo_core.planning.models.registry import OPT_KINDS, SHIPPED_PAIRS, ModelRegistry
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.opt.interface import Planner
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import Scenario
 
@@ -79,7 +79,9 @@ def build_planners(
     if cache is not None and set(cache) == set(cell.arm_ids):
         return dict(cache)
     out: dict[str, Planner] = {}
-    settings = (settings or PlannerSettings()).replace(tick=period)  # plan() runs once a period
+    settings = (settings or PlannerSettings()).override(
+        {"opt.tick": period}
+    )  # plan() runs once a period
     for arm_id, kind in kinds.items():
         models = registry.models_for(kind, cell) if kind in OPT_KINDS else []
         if kind in OPT_KINDS and not models and len(cell.arms) > 1:  # alone: nothing to model

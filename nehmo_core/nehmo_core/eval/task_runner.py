@@ -38,7 +38,7 @@ from nehmo_core.eval.report import error_notes, json_safe
 from nehmo_core.eval.setups import OPT_KINDS, parse_row, row_slug
 from nehmo_core.logs import remove_bag
 from nehmo_core.planning.models.registry import ModelRegistry, ValueModelSource
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.sim.cell_sim import CellSimulator
 
 __all__ = ["PUBLISHED", "TIME_LIMIT", "TaskConfig", "run_tasks", "task_summary"]

@@ -33,7 +33,7 @@ from nehmo_core.planning.baselines.ompl import OmplSettings, plan_rrt_connect
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.interface import Planner
-from nehmo_core.planning.opt.settings import PAPER_OPT, PlannerSettings
+from nehmo_core.planning.settings import PAPER_OPT, PlannerSettings
 from nehmo_core.robots.model import Cell
 
 __all__ = ["CENTRALIZED", "DECENTRALIZED", "centralized_trackers", "make_planner"]
@@ -55,9 +55,9 @@ def make_planner(
         if not models and len(cell.arms) > 1:  # an arm alone has no pair to model
             raise InvalidValueError("models", f"must hold at least one pair model for {kind!r}", [])
         if kind == "nehmo_wrap":
-            settings = (settings or PlannerSettings()).replace(wrap_goal=True)
+            settings = (settings or PlannerSettings()).override({"opt.wrap_goal": True})
         if kind == "nehmo_paper":
-            settings = (settings or PlannerSettings()).replace(**PAPER_OPT)
+            settings = (settings or PlannerSettings()).override(PAPER_OPT)
         return NehmoPlanner(cell, arm_id, models, settings)
     if kind in ("naive", "reckless"):
         return NaivePlanner(cell, arm_id, settings, reckless=kind == "reckless")
@@ -102,7 +102,7 @@ def centralized_trackers(
             }
     else:
         raise UnknownNameError("centralized planner", kind, CENTRALIZED)
-    trajectory = retime(waypoints, s.u_max)
+    trajectory = retime(waypoints, s.opt.u_max)
     trackers: dict[str, Planner] = {
         a.arm_id: TrajectoryTracker(cell, trajectory, a.arm_id, period, s, plan_time)
         for a in cell.arms

@@ -44,8 +44,8 @@ from nehmo_core.planning.opt.pipeline import (
     read_tick,
 )
 from nehmo_core.planning.opt.problem import LinearRows, OptProblem, project_step
-from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.planning.opt.tick import PeerValues, Tick
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.solvers.base import OptSolver, make_solver, ready_solver
 from nehmo_core.planning.stages import build_stages
 from nehmo_core.robots.model import Cell
@@ -85,7 +85,7 @@ class NehmoPlanner:
         self._objectives: tuple[Objective, ...] = staged.objectives
         self._filters: tuple[CommandFilter, ...] = staged.filters
         self._fallback: Fallback = staged.fallback or HjiFailSafe(
-            self.robot.dof, s.fail_safe_deadband
+            self.robot.dof, s.fail_safe.deadband
         )
         self.reset()
 
@@ -170,14 +170,14 @@ class NehmoPlanner:
         """``u`` [rad/s], or the nearest command whose step keeps ``rows``."""
         if rows is None or rows.count == 0:
             return u
-        t = self.settings.t_plan
-        return project_step(t * u, rows, t * self.settings.u_max) / t
+        t = self.settings.opt.t_plan
+        return project_step(t * u, rows, t * self.settings.opt.u_max) / t
 
     def fail_safe_command(
         self, now: PeerValues, rows: LinearRows | None = None, cap: float = FULL_SPEED
     ) -> np.ndarray:
         """The fallback's command within ``cap·ū``, kept within ``rows``."""
-        return self.keep_rows(self._fallback.command(now, cap * self.settings.u_max), rows)
+        return self.keep_rows(self._fallback.command(now, cap * self.settings.opt.u_max), rows)
 
     def fail_safe(
         self,
@@ -218,7 +218,7 @@ class NehmoPlanner:
         and treated as silent. The command's own announcement is ``telemetry.speed_bound``.
         """
         start = time.perf_counter()
-        deadline = start + self.settings.deadline
+        deadline = start + self.settings.opt.deadline
         tick = read_tick(self, q_self, peers, q_goal, self.opt.bounds(peer_bounds), peer_bounds)
         for objective in self._objectives:
             objective.begin(tick)
@@ -233,9 +233,9 @@ class NehmoPlanner:
         s = self.settings
         tick.rows = self.rows(tick.q)
         if not self.pairs:
-            y_max = s.t_plan * s.u_max * tick.cap
-            u = self.keep_rows(np.clip(-tick.error0, -y_max, y_max) / s.t_plan, tick.rows)
-            self._warm = u * s.t_plan
+            y_max = s.opt.t_plan * s.opt.u_max * tick.cap
+            u = self.keep_rows(np.clip(-tick.error0, -y_max, y_max) / s.opt.t_plan, tick.rows)
+            self._warm = u * s.opt.t_plan
             return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
         now = self.current(tick.q, tick.peers, tick.bounds)
         target = self._target(tick, now)
@@ -288,7 +288,7 @@ class NehmoPlanner:
     def _solve(self, problem: OptProblem, deadline: float) -> tuple[Any, str]:
         """The solver's result from the warm start (None if it crashed) and its status."""
         try:
-            hessian = self._hessian if self.settings.sqp_warm_hessian else None
+            hessian = self._hessian if self.settings.solver.sqp_warm_hessian else None
             y_start = problem.naive_step() if self._warm is None else self._warm
             result = self.solver(problem, y_start, deadline, hessian)
             return result, result.status

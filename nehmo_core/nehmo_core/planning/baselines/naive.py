@@ -29,7 +29,7 @@ from nehmo_core.planning.opt.interface import (
     goal_error,
     one_joint_vector,
 )
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
 __all__ = ["NaivePlanner", "TimedTrajectory", "TrajectoryTracker", "retime"]
@@ -65,8 +65,10 @@ class NaivePlanner(WithoutValues):
         start = time.perf_counter()
         q = one_joint_vector(self.robot.check_q(q_self, "q_self"), "q_self")
         goal = one_joint_vector(self.robot.check_q(q_goal, "q_goal"), "q_goal")
-        error = goal_error(q, goal, self.robot, self.settings.wrap_goal)
-        u = np.clip(-error / self.settings.t_plan, -self.settings.u_max, self.settings.u_max)
+        error = goal_error(q, goal, self.robot, self.settings.opt.wrap_goal)
+        u = np.clip(
+            -error / self.settings.opt.t_plan, -self.settings.opt.u_max, self.settings.opt.u_max
+        )
         return PlanResult(u, Telemetry(time.perf_counter() - start, self.status))
 
 
@@ -140,7 +142,7 @@ class TrajectoryTracker(WithoutValues):
         predicted = q + self.period * self._last
         target = self.trajectory.sample(self.arm_id, self._t + self.period)
         error = goal_error(predicted, target, self.robot, wrap=True)
-        u = np.clip(-error / self.period, -self.settings.u_max, self.settings.u_max)
+        u = np.clip(-error / self.period, -self.settings.opt.u_max, self.settings.opt.u_max)
         self._last = u
         elapsed = time.perf_counter() - start + (self.plan_time if self._t == 0.0 else 0.0)
         self._t += self.period

@@ -1,6 +1,6 @@
 """Certified margins: the level ``V ≥ margin`` each pair model's rows of Opt keep.
 
-With certified margins (``PlannerSettings.certified_epsilon``), rows against a peer at full speed
+With certified margins (``PlannerSettings.margins.certified``), rows against a peer at full speed
 keep ε: the largest of the floor (the settings' ε) and every ``δ`` the cards of the planner's
 models certify (``nehmo verify``) at ``t_safe``. Rows against a peer that announced a speed bound,
 planned at time-to-go ``bound·t_safe``, keep ``max(settled floor, δ)`` of their own model's

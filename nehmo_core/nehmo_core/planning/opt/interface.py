@@ -42,7 +42,7 @@ class Telemetry:
     ``V(t_plan, x)`` [m] over constrained peers at the current state (``inf`` without peers).
     ``escaping``: NeHMO is leaving a stall (see ``PlannerSettings.escape``); ``evading``: heading
     out of the predicted path of a peer that announces nothing
-    (``PlannerSettings.silent_lookahead``).
+    (``PlannerSettings.silent_watch``).
     """
 
     solve_time: float  # [s], wall time of the whole plan() call

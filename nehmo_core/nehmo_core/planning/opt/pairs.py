@@ -20,8 +20,8 @@ from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.opt.peer_bounds import FULL_SPEED, check_bound
 from nehmo_core.planning.opt.problem import Constraints, LinearRows, OptProblem
 from nehmo_core.planning.opt.problem import worst_case_disturbance as worst_case
-from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.planning.opt.tick import PeerValues
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
 __all__ = ["PeerPairs"]
@@ -41,17 +41,17 @@ class PeerPairs:
         self.robot = cell.arm(arm_id).robot
         self.models = list(models)
         self.pairs, self.skipped, self.unmodelled = constrained_pairs(
-            cell, arm_id, [m.geometry for m in self.models], settings.reach_margin
+            cell, arm_id, [m.geometry for m in self.models], settings.opt.reach_margin
         )
         self.margins = CertifiedMargins(
             self.models,
             [m.model_index for m in self.pairs.values()],
-            settings.epsilon,
-            settings.settled_epsilon,
-            settings.t_safe,
-            settings.certified_epsilon,
+            settings.opt.epsilon,
+            settings.hold.settled_epsilon,
+            settings.opt.t_safe,
+            settings.margins.certified,
         )
-        self.settings = settings.replace(epsilon=self.margins.epsilon)
+        self.settings = settings.override({"opt.epsilon": self.margins.epsilon})
         self._last: tuple[object, PeerValues] | None = None  # see current()
 
     def forget(self) -> None:
@@ -106,7 +106,7 @@ class PeerPairs:
         now = PeerValues(ids, index, states, values, grads, np.array([bounds[p] for p in ids]))
         for m, b, members in now.groups:
             v, g = self.models[m].evaluate(
-                b * self.settings.t_plan, np.array([states[i] for i in members])
+                b * self.settings.opt.t_plan, np.array([states[i] for i in members])
             )
             for k, i in enumerate(members):
                 values[i], grads[i] = v[k], g[k]
@@ -127,11 +127,11 @@ class PeerPairs:
             predicted = np.array([now.states[i] for i in members])
             n12 = n1 + self.models[m].n2  # a conditioned model's r (after q²) never moves
             peer_grads = np.array([now.grads[i][n1:n12] for i in members])
-            predicted[:, n1:n12] += s.t_plan * worst_case(peer_grads, b * s.d_max)
+            predicted[:, n1:n12] += s.opt.t_plan * worst_case(peer_grads, b * s.opt.d_max)
             groups.append((m, predicted))
-            horizons.append(b * s.t_safe)
+            horizons.append(b * s.opt.t_safe)
             margins.append(self.group_margin(m, b))
         constraints = Constraints(
-            self.models, groups, s.t_safe, s.epsilon, rows, tuple(horizons), tuple(margins)
+            self.models, groups, s.opt.t_safe, s.opt.epsilon, rows, tuple(horizons), tuple(margins)
         )
-        return OptProblem(target, s.t_plan * s.u_max * cap, s.t_plan, constraints)
+        return OptProblem(target, s.opt.t_plan * s.opt.u_max * cap, s.opt.t_plan, constraints)

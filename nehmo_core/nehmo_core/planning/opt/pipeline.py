@@ -31,8 +31,8 @@ from nehmo_core.planning.models.pair_frame import PairMapping
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.opt.interface import check_peers, goal_error, one_joint_vector
 from nehmo_core.planning.opt.problem import LinearRows
-from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.planning.opt.tick import PeerValues, Tick
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell, RobotModel
 
 __all__ = [
@@ -171,7 +171,7 @@ def read_tick(
     return Tick(
         q=q,
         goal=goal,
-        error0=goal_error(q, goal, arm.robot, arm.settings.wrap_goal),
+        error0=goal_error(q, goal, arm.robot, arm.settings.opt.wrap_goal),
         peers=others,
         bounds=bounds,
         participants=frozenset(p for p in peer_bounds or {} if p in arm.pairs),

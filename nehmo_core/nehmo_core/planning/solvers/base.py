@@ -11,7 +11,7 @@ import numpy as np
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.opt.problem import OptProblem
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import PlannerSettings, SolverSettings
 from nehmo_core.planning.solvers.ipopt import IpoptSolver
 from nehmo_core.planning.solvers.native import loop
 from nehmo_core.planning.solvers.sqp import SolveResult, solve_sqp
@@ -36,10 +36,10 @@ class SqpSolver:
     """:func:`solve_sqp` with fixed tolerance, iteration limit, screening margin and loop
     (by default those of :class:`PlannerSettings`)."""
 
-    tol: float = PlannerSettings.sqp_tol
-    max_iter: int = PlannerSettings.sqp_max_iter
-    screen: float | None = PlannerSettings.sqp_screen
-    native: bool = PlannerSettings.sqp_native
+    tol: float = SolverSettings.sqp_tol
+    max_iter: int = SolverSettings.sqp_max_iter
+    screen: float | None = SolverSettings.sqp_screen
+    native: bool = SolverSettings.sqp_native
 
     def __call__(
         self,
@@ -61,11 +61,16 @@ class SqpSolver:
 
 
 def make_solver(settings: PlannerSettings) -> OptSolver:
-    """The solver named by ``settings.solver``."""
-    if settings.solver == "ipopt":
-        return IpoptSolver(settings.ipopt_tol, settings.ipopt_max_iter, settings.deadline).solve
+    """The solver named by ``settings.solver.name``."""
+    if settings.solver.name == "ipopt":
+        return IpoptSolver(
+            settings.solver.ipopt_tol, settings.solver.ipopt_max_iter, settings.opt.deadline
+        ).solve
     return SqpSolver(
-        settings.sqp_tol, settings.sqp_max_iter, settings.sqp_screen, settings.sqp_native
+        settings.solver.sqp_tol,
+        settings.solver.sqp_max_iter,
+        settings.solver.sqp_screen,
+        settings.solver.sqp_native,
     )
 
 
@@ -75,11 +80,11 @@ def ready_solver(
     """``solver`` for ``models``, checked (``t_safe`` within every model's horizon) and made
     ready: the C loop built (first use in this cache) and the models loaded now, not in a tick."""
     for model in models:
-        if not settings.t_safe <= model.horizon + 1e-9:
+        if not settings.opt.t_safe <= model.horizon + 1e-9:
             raise InvalidValueError(
-                "t_safe",
+                "opt.t_safe",
                 f"must be <= the horizon of model {model.name!r} ({model.horizon})",
-                settings.t_safe,
+                settings.opt.t_safe,
             )
     if isinstance(solver, SqpSolver) and solver.native:
         c_loop = loop()

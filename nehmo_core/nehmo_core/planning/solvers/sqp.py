@@ -25,7 +25,7 @@ import numpy as np
 
 from nehmo_core.planning.numerics.qp import QPStep, qp_step
 from nehmo_core.planning.opt.problem import OptProblem
-from nehmo_core.planning.opt.settings import PlannerSettings
+from nehmo_core.planning.settings import SolverSettings
 from nehmo_core.planning.solvers.native import loop
 
 __all__ = ["QPStep", "SolveResult", "qp_step", "solve_sqp"]
@@ -81,12 +81,12 @@ def _bfgs(B: np.ndarray, s: np.ndarray, r: np.ndarray) -> np.ndarray:
 def solve_sqp(
     problem: OptProblem,
     y_start: np.ndarray,
-    tol: float = PlannerSettings.sqp_tol,
-    max_iter: int = PlannerSettings.sqp_max_iter,
+    tol: float = SolverSettings.sqp_tol,
+    max_iter: int = SolverSettings.sqp_max_iter,
     deadline: float = np.inf,
     hessian: np.ndarray | None = None,
     feasibility_tol: float = 1e-7,
-    screen: float | None = PlannerSettings.sqp_screen,
+    screen: float | None = SolverSettings.sqp_screen,
     native: bool = True,
 ) -> SolveResult:
     """Solve ``problem`` from ``y_start``; ``deadline`` is a ``time.perf_counter()`` instant.

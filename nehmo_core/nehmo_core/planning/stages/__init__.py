@@ -66,17 +66,17 @@ def build_stages(host: Host) -> Staged:
     """The stages ``host.settings`` switch on, built for ``host``."""
     s = host.settings
     objectives: list[Objective] = []
-    if s.silent_lookahead > 0.0:  # before the escape: stepping aside wins over escaping
+    if s.silent_watch.lookahead > 0.0:  # before the escape: stepping aside wins over escaping
         objectives.append(SilentPeers(host))
-    if s.escape:
+    if s.escape.enabled:
         objectives.append(StallEscape(host))
     rows: tuple[RowProvider, ...] = ()
-    if s.self_clearance:
-        rows = (SelfClearance(host.robot, s.self_influence, s.self_safety, s.self_gain),)
+    if s.self_clearance.enabled:
+        rows = (SelfClearance(host.robot, s.self_clearance),)
     return Staged(
-        announcer=HoldAnnouncer(host) if s.hold_bound < FULL_SPEED else None,
+        announcer=HoldAnnouncer(host) if s.hold.bound < FULL_SPEED else None,
         rows=rows,
         objectives=tuple(objectives),
-        filters=(ExactGuard(host),) if s.exact_guard > 0.0 else (),
-        fallback=MaximinFallback(host) if s.fail_safe == "maximin" else None,
+        filters=(ExactGuard(host),) if s.exact_guard.gap > 0.0 else (),
+        fallback=MaximinFallback(host) if s.fail_safe.kind == "maximin" else None,
     )

@@ -1,14 +1,15 @@
 """The exact-geometry guard of a NeHMO arm beside peers that hold still at their goals.
 
-A command filter stage (settings ``exact_guard`` [m]; 0, the ``paper`` preset, turns it off). It
-only shortens a command (to ½, ¼ or nothing); the V rows against every peer's worst case stay.
+A command filter stage (settings group ``exact_guard``; ``gap`` 0, the ``paper`` preset, turns
+it off). It only shortens a command (to ½, ¼ or nothing); the V rows against every peer's worst
+case stay.
 
 Against a peer that announced a speed bound (it holds at its goal, :mod:`.speed_bounds`) the
 value rows keep only the settled margin, and the learned distance under them can err by a few
 centimetres near contact. The guard closes that gap with the arms' real geometry: before a
 command is sent, the arm's pose after the step (and halfway) is checked against every holding
 peer's current pose with PyBullet. A step that would bring the arms closer than
-``exact_guard`` [m] is shortened (to ½, ¼ of it, or nothing) until it does not, unless the
+``exact_guard.gap`` [m] is shortened (to ½, ¼ of it, or nothing) until it does not, unless the
 arms are already closer and the step does not bring them closer still. The peer's own motion
 within its bound is left to the value rows; a peer that breaks its bound is fled from by the
 threat test, which checks the real geometry too (:func:`closer_than`).
@@ -27,19 +28,14 @@ import numpy as np
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import Host
-from nehmo_core.planning.opt.settings import PlannerSettings
 from nehmo_core.planning.opt.tick import PeerValues, Tick
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
-__all__ = ["GUARD_NEAR", "ExactGuard", "closer_than", "guard_step", "prepare"]
-
-GUARD_NEAR = 0.15
-"""Only peers whose ``V`` now reads below this [m] are checked (the learned values err by a few
-centimetres; a step moves the arm's points a few centimetres at most)."""
+__all__ = ["ExactGuard", "closer_than", "guard_step", "prepare"]
 
 _WORLDS: OrderedDict[Cell, CellWorld] = OrderedDict()  # cells compare by value
 _KEEP = 2
-_SCALES = (1.0, 0.5, 0.25)
 
 
 def _world(cell: Cell) -> CellWorld:
@@ -73,17 +69,18 @@ def guard_step(
     held: Mapping[str, np.ndarray],
     settings: PlannerSettings,
 ) -> float:
-    """The share of the command ``u`` [rad/s] (1, ½, ¼ or 0), held for ``t_plan``, that keeps
-    arm ``arm_id`` at least ``exact_guard`` [m] from every peer of ``held`` (``{peer: q}``, posed
-    as given) at the step's end and midpoint, or no closer than now where it already is closer."""
-    floor, step = settings.exact_guard, u * settings.t_plan
+    """The share of the command ``u`` [rad/s] (one of ``exact_guard.scales`` or 0), held for
+    ``opt.t_plan``, that keeps arm ``arm_id`` at least ``exact_guard.gap`` [m] from every peer
+    of ``held`` (``{peer: q}``, posed as given) at the step's end and midpoint, or no closer than
+    now where it already is closer."""
+    floor, step = settings.exact_guard.gap, u * settings.opt.t_plan
     if not held or floor <= 0.0:
         return 1.0
     world = _world(cell)
     cutoff = 2.0 * floor + 0.05
     world.set_configuration(held)
     now = _closest(world, arm_id, q, held, cutoff)
-    for scale in _SCALES:
+    for scale in settings.exact_guard.scales:
         ends = [_closest(world, arm_id, q + f * scale * step, held, cutoff) for f in (1.0, 0.5)]
         if min(ends) >= min(floor, now):
             return scale
@@ -113,7 +110,7 @@ class ExactGuard:
     def __init__(self, host: Host) -> None:
         self.host = host
         self.shortened = 0
-        if host.settings.hold_bound < FULL_SPEED and host.pairs:
+        if host.settings.hold.bound < FULL_SPEED and host.pairs:
             prepare(host.cell)  # build the world now, not in the first tick
 
     def reset(self) -> None:
@@ -122,11 +119,12 @@ class ExactGuard:
     def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
         """``u`` shortened by :func:`guard_step` against the peers near now that keep an
         announced bound (they take part in the announcements)."""
-        near = [p for p, v in zip(now.ids, now.values, strict=True) if v < GUARD_NEAR]
+        host = self.host
+        near_v = host.settings.exact_guard.near
+        near = [p for p, v in zip(now.ids, now.values, strict=True) if v < near_v]
         held = {
             p: tick.peers[p] for p in near if p in tick.participants and tick.bounds[p] < FULL_SPEED
         }
-        host = self.host
         share = guard_step(host.cell, host.arm_id, tick.q, u, held, host.settings)
         self.shortened += share < 1.0
         return u * share

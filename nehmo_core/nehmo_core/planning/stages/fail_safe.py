@@ -1,7 +1,7 @@
 """The fail-safe against several critical peers at once.
 
-A fallback stage (settings ``fail_safe = "maximin"``, ``fail_safe_band``, ``fail_safe_slack``,
-``fail_safe_harm``; ``"single"``, the ``paper`` preset, keeps the paper's fail-safe). It changes
+A fallback stage (settings group ``fail_safe``, ``kind = "maximin"``; ``"single"``, the ``paper``
+preset, keeps the paper's fail-safe). It changes
 only the command applied when Opt fails; with one constrained peer it is the paper's.
 
 The paper's fail-safe ``ū·sign(∂V/∂q¹)`` follows one pair, the most critical. An arm between two
@@ -175,8 +175,8 @@ class MaximinFallback:
     def __init__(self, host: Host) -> None:
         self.host = host
         s = host.settings
-        self.critical = MaximinFailSafe(s.fail_safe_band)
-        self.single = HjiFailSafe(host.robot.dof, s.fail_safe_deadband)
+        self.critical = MaximinFailSafe(s.fail_safe.band)
+        self.single = HjiFailSafe(host.robot.dof, s.fail_safe.deadband)
 
     def reset(self) -> None:
         self.critical.reset()
@@ -188,14 +188,14 @@ class MaximinFallback:
         chosen = self.critical.critical(now.ids, now.values)
         own = np.array([now.grads[i][:n1] for i in chosen])
         peer = np.array([now.grads[i][n1 : n1 + models[now.model_index[i]].n2] for i in chosen])
-        d_max = s.d_max * now.bounds[chosen]
+        d_max = s.opt.d_max * now.bounds[chosen]
         return maximin_command(
             own,
             peer,
             u_max,
             d_max,
             now.values[chosen],
-            s.t_plan,
-            s.fail_safe_slack,
-            s.fail_safe_harm,
+            s.opt.t_plan,
+            s.fail_safe.slack,
+            s.fail_safe.harm,
         )

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as pb
 
-from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.opt.problem import LinearRows, project_step
+from nehmo_core.planning.settings import SelfClearanceSettings
 from nehmo_core.planning.stages.self_clearance_setup import distance_slopes, witness_order
 from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel
 
@@ -43,13 +43,6 @@ class SelfClearanceRows(LinearRows):
 
 MIN_GRADIENT = 1e-4
 """Rows whose ``|∂d/∂q|`` is below this [m/rad] in every joint are left out."""
-
-QUERY_REACH = 0.5
-"""[m] How far beyond the influence distance each pair is queried: a pair found farther than
-that, or with margin to spare, is not queried again until the joints have moved enough to
-bring it within the influence distance (see :meth:`SelfClearance._lipschitz`). On the UR5's
-closed-loop joint paths of the planning-speed bench, 0.5 m asks 5.4 pairs per step against 7.7
-at 0.15 m (a pair out of reach reads as at the reach, so a short reach brings it back soon)."""
 
 _WITNESS_ORDER: dict[RobotModel, dict[tuple[str, str], bool]] = {}
 """Per robot: :meth:`SelfClearance._witness_order` (found once per process, from the robot's
@@ -74,8 +67,8 @@ def _empty_rows(n: int) -> SelfClearanceRows:
 
 class SelfClearance:
     """Builds the damper rows of ``robot`` at a joint vector (own PyBullet client): the
-    ``self_clearance`` row provider of a planner (settings ``self_influence``, ``self_safety``,
-    ``self_gain``). It adds rows; the V rows stay."""
+    ``self_clearance`` row provider of a planner (settings group ``self_clearance``). It adds
+    rows; the V rows stay."""
 
     name = "self_clearance"
 
@@ -85,18 +78,12 @@ class SelfClearance:
     def __init__(
         self,
         robot: RobotModel,
-        influence: float = 0.10,
-        safety: float = 0.005,
-        gain: float = 0.5,
+        settings: SelfClearanceSettings | None = None,
     ) -> None:
-        if not influence > safety >= 0.0:
-            raise InvalidValueError(
-                "self_influence", f"must be > self_safety ({safety}) >= 0", influence
-            )
-        if not 0.0 < gain <= 1.0:
-            raise InvalidValueError("self_gain", "must lie in (0, 1]", gain)
+        s = settings or SelfClearanceSettings()
         self.robot = robot
-        self.influence, self.safety, self.gain = influence, safety, gain
+        self.influence, self.safety, self.gain = s.influence, s.safety, s.gain
+        self.query_reach = s.query_reach
         shared = _WORLDS.get(robot)
         if shared is None:
             arm = ArmSpec("self", robot, Pose())
@@ -233,7 +220,7 @@ class SelfClearance:
             return _empty_rows(n)
         self._world.set_joint_positions("self", q)
         near = []  # (pair, d, p_a, p_b, normal from p_b to p_a) of the pairs within influence
-        reach = self.influence + QUERY_REACH
+        reach = self.influence + self.query_reach
         self.queries += len(ask)
         for i in ask:
             a, b_link, la, lb = self._pairs[i]

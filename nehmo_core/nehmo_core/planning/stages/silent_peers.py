@@ -1,7 +1,7 @@
 """Stepping out of the way of a peer that announces nothing (not in the paper).
 
-An objective stage (settings ``silent_lookahead`` [s], ``silent_clearance`` [m], ``tick`` [s];
-``silent_lookahead = 0``, the ``paper`` preset, turns it off). It changes only Opt's target; the
+An objective stage (settings group ``silent_watch``; ``silent_watch.lookahead = 0``, the ``paper``
+preset, turns it off). It changes only Opt's target; the
 V rows against every peer's worst case stay.
 
 A peer that takes no part in the speed announcements (a reckless or foreign arm) is planned at
@@ -16,8 +16,8 @@ the Kinova's remaining path.
 its position between two ``plan()`` calls ``tick`` apart, continuous joints wrapped, clipped to
 the peers' speed bound ``d̄``: a call that follows a skipped tick cannot make a peer look faster
 than it may move) up to ``lookahead`` seconds and
-evaluates ``V(t_plan)`` with the peer at four points of that path. When the lowest is below
-``clearance`` and lower than now by more than :data:`APPROACH` (the peer is coming closer), the
+evaluates ``V(t_plan)`` with the peer at ``points`` of that path. When the lowest is below
+``clearance`` and lower than now by more than ``approach`` (the peer is coming closer), the
 step's target becomes a full-speed step up ``∂V/∂q_own`` at that point instead of the goal.
 Only the objective changes: the V rows against the peer's worst case stay as they are, so the
 guarantee of the paper's Opt is kept, and a peer that stops (or moves away) stops steering it.
@@ -32,14 +32,10 @@ import numpy as np
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.tick import PeerValues, Tick
+from nehmo_core.planning.settings import SilentWatchSettings
 from nehmo_core.robots.model import RobotModel
 
-__all__ = ["APPROACH", "SilentPathWatch", "SilentPeers"]
-
-#: [m] a predicted V must be this much below the current one to count as an approach.
-APPROACH = 0.02
-#: shares of ``lookahead`` at which the peer's path is evaluated.
-_POINTS = np.array([0.25, 0.5, 0.75, 1.0])
+__all__ = ["SilentPathWatch", "SilentPeers"]
 
 
 class SilentPathWatch:
@@ -52,9 +48,13 @@ class SilentPathWatch:
         tick: float,
         d_max: float,
         robots: Mapping[str, RobotModel] | None = None,
+        approach: float = SilentWatchSettings.approach,
+        points: Sequence[float] = SilentWatchSettings.points,
     ) -> None:
         self.lookahead = lookahead
         self.clearance = clearance
+        self.approach = approach
+        self.points = np.asarray(points, dtype=float)
         self.tick = tick
         self.d_max = d_max
         self.robots = dict(robots or {})  # peer id → its robot (continuous joints wrapped)
@@ -106,12 +106,12 @@ class SilentPathWatch:
             if v is None:
                 continue
             model = models[model_index[i]]
-            path = np.repeat(states[i][None, :], len(_POINTS), axis=0)
-            path[:, n1 : n1 + model.n2] += np.outer(_POINTS * self.lookahead, v)
+            path = np.repeat(states[i][None, :], len(self.points), axis=0)
+            path[:, n1 : n1 + model.n2] += np.outer(self.points * self.lookahead, v)
             ahead, grads = model.evaluate(t_plan, path)
             j = int(np.argmin(ahead))
             low = float(ahead[j])
-            approaching = low < self.clearance and low < values[i] - APPROACH
+            approaching = low < self.clearance and low < values[i] - self.approach
             if approaching and (worst is None or low < worst[0]):
                 worst = (low, grads[j][:n1])
         if worst is None:
@@ -129,10 +129,10 @@ class SilentPeers:
 
     def __init__(self, host: Host) -> None:
         self.host = host
-        s = host.settings
+        s, w = host.settings, host.settings.silent_watch
         robots = {p: host.cell.arm(p).robot for p in host.pairs}
         self.watch = SilentPathWatch(
-            s.silent_lookahead, s.silent_clearance, s.tick, s.d_max, robots
+            w.lookahead, w.clearance, s.opt.tick, s.opt.d_max, robots, w.approach, w.points
         )
 
     def reset(self) -> None:
@@ -146,7 +146,7 @@ class SilentPeers:
         velocities = self.watch.velocities(tick.peers, tick.participants)
         return self.watch.target(
             host.models, now.ids, now.model_index, now.states, now.values, velocities,
-            host.robot.dof, s.t_plan, s.t_plan * s.u_max * tick.cap,
+            host.robot.dof, s.opt.t_plan, s.opt.t_plan * s.opt.u_max * tick.cap,
         )  # fmt: skip
 
     def after(self, tick: Tick, min_constraint: float) -> None:

@@ -1,8 +1,8 @@
 """Announced speed bounds, the announcing side: an arm settled at its goal promises to move
 slowly, so its peers may plan against ``V(k·t_safe)`` instead of ``V(t_safe)`` with it.
 
-An announcer stage (settings ``hold_bound``, ``hold_tolerance``, ``hold_release``,
-``bound_release_ticks``; ``hold_bound = 1``, the ``paper`` preset, announces nothing). It
+An announcer stage (settings group ``hold``; ``hold.bound = 1``, the ``paper`` preset, announces
+nothing). It
 changes the share of ū this arm's commands keep and what it announces; the V rows against every
 peer's worst case stay (why a kept bound is safe: :mod:`nehmo_core.planning.opt.peer_bounds`).
 
@@ -29,7 +29,7 @@ import numpy as np
 from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.tick import Tick
-from nehmo_core.planning.stages.exact_guard import GUARD_NEAR, closer_than
+from nehmo_core.planning.stages.exact_guard import closer_than
 
 __all__ = ["HoldAnnouncer"]
 
@@ -46,7 +46,7 @@ class HoldAnnouncer:
 
     def reset(self) -> None:
         # this arm's recent announcements (newest last); its commands keep the smallest
-        self._announced = deque([FULL_SPEED], maxlen=self.settings.bound_release_ticks + 1)
+        self._announced = deque([FULL_SPEED], maxlen=self.settings.hold.release_ticks + 1)
         self.holding = False  # settled at the goal, announcing hold_bound
 
     @property
@@ -64,12 +64,12 @@ class HoldAnnouncer:
         until a peer breaks the slow game (:meth:`threatened`), else full speed."""
         s = self.settings
         e = float(np.linalg.norm(tick.error0))
-        live = self.holding or e <= s.hold_tolerance  # else the threat test cannot matter
-        if e > s.hold_release or (live and self.threatened(tick)):
+        live = self.holding or e <= s.hold.tolerance  # else the threat test cannot matter
+        if e > s.hold.release or (live and self.threatened(tick)):
             self.holding = False
-        elif e <= s.hold_tolerance:
+        elif e <= s.hold.tolerance:
             self.holding = True
-        tick.announced = s.hold_bound if self.holding else FULL_SPEED
+        tick.announced = s.hold.bound if self.holding else FULL_SPEED
         self._announced.append(tick.announced)
         tick.cap = self.speed_cap
 
@@ -82,10 +82,16 @@ class HoldAnnouncer:
         ids = [p for p in host.pairs if tick.bounds[p] >= FULL_SPEED]
         if not ids:
             return False
-        slow = host.evaluate(tick.q, tick.peers, ids, dict.fromkeys(ids, s.hold_bound))
-        half = [0.5 * host.group_margin(host.pairs[p].model_index, s.hold_bound) for p in ids]
-        floor = [h if p in tick.participants else s.epsilon for p, h in zip(ids, half, strict=True)]
+        slow = host.evaluate(tick.q, tick.peers, ids, dict.fromkeys(ids, s.hold.bound))
+        half = [0.5 * host.group_margin(host.pairs[p].model_index, s.hold.bound) for p in ids]
+        floor = [
+            h if p in tick.participants else s.opt.epsilon for p, h in zip(ids, half, strict=True)
+        ]
         if np.any(slow.values < np.array(floor)):
             return True
-        near = {p: tick.peers[p] for p, v in zip(ids, slow.values, strict=True) if v < GUARD_NEAR}
-        return closer_than(host.cell, host.arm_id, tick.q, near, s.exact_guard)
+        near = {
+            p: tick.peers[p]
+            for p, v in zip(ids, slow.values, strict=True)
+            if v < s.exact_guard.near
+        }
+        return closer_than(host.cell, host.arm_id, tick.q, near, s.exact_guard.gap)

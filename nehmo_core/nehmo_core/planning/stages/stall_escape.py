@@ -1,7 +1,6 @@
 """The stall escape of a NeHMO arm: leave a local minimum on the safe set, or yield the goal.
 
-An objective stage (settings ``escape``, ``stall_ticks``, ``escape_ticks``, ``yield_ticks``,
-``stall_progress``, ``stall_margin``, ``escape_seed``; off in the ``paper`` preset). It changes
+An objective stage (settings group ``escape``; off in the ``paper`` preset). It changes
 only Opt's target; the V rows against every peer's worst case stay.
 
 Opt only ever takes the step closest to the goal, so an arm whose goal lies behind a peer's
@@ -9,7 +8,7 @@ level set stops where the goal direction meets the constraint. :class:`StallEsca
 without progress against an active V row and, after ``stall_ticks`` of them, swaps the goal
 error for a target step along a random direction projected onto the tangent space of the
 critical pair's level set (or, at the goal, up V's gradient) for ``escape_ticks`` calls (doubled
-with every escape from the same trap, up to four times).
+with every escape from the same trap, up to ``max_stretch`` times as long).
 """
 
 from __future__ import annotations
@@ -39,7 +38,7 @@ class StallEscape:
 
     def reset(self) -> None:
         """A new episode: the random stream starts again, the stall state is forgotten."""
-        seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape_seed
+        seed = zlib.crc32(self.arm_id.encode()) ^ self.settings.escape.seed
         self.rng = np.random.default_rng(seed)
         self.clear()
 
@@ -79,22 +78,22 @@ class StallEscape:
         peak = float(np.abs(d).max())
         if peak < 1e-9:
             return np.zeros(self.dof)
-        return -(self.settings.t_plan * self.settings.u_max / peak) * d
+        return -(self.settings.opt.t_plan * self.settings.opt.u_max / peak) * d
 
     def after(self, tick: Tick, min_constraint: float) -> None:
         """Count the call, unless another stage steered it (stepping aside is no stall)."""
         if tick.steered_by in (None, self.name):
-            self.track(tick.error0, min_constraint < self.settings.stall_margin)
+            self.track(tick.error0, min_constraint < self.settings.escape.stall_margin)
 
     def track(self, error0: np.ndarray, pressed: bool) -> None:
         """Count calls without progress while a V row is active; start an escape (away from
         the goal) or a yield (at the goal) after ``stall_ticks`` of them."""
         s = self.settings
         e = float(np.linalg.norm(error0))
-        step = s.t_plan * s.u_max
-        progressed = self.last_error - e > s.stall_progress * step
+        step = s.opt.t_plan * s.opt.u_max
+        progressed = self.last_error - e > s.escape.stall_progress * step
         self.last_error = e
-        if self.best_error - e > s.stall_progress * step:
+        if self.best_error - e > s.escape.stall_progress * step:
             # closer than ever before: a stall from here on is a new trap, not the same one
             self.best_error = e
             self.escapes = 0
@@ -105,13 +104,15 @@ class StallEscape:
             self.stall = 0
             return
         self.stall += 1
-        if self.stall < s.stall_ticks:
+        if self.stall < s.escape.stall_ticks:
             return
         self.stall = 0
         self.yielding = e < step
         if self.yielding:
-            self.escape_left = s.yield_ticks
+            self.escape_left = s.escape.yield_ticks
         else:
             self.escapes += 1
-            self.escape_left = s.escape_ticks * min(2 ** (self.escapes - 1), 4)
+            self.escape_left = s.escape.escape_ticks * min(
+                2 ** (self.escapes - 1), s.escape.max_stretch
+            )
             self.direction = self.rng.standard_normal(self.dof)

@@ -1,0 +1,49 @@
+"""Settings of the NeHMO planner in groups: ``opt``, ``margins``, ``solver``, ``fail_safe`` and
+one group per stage beyond the paper (``hold``, ``exact_guard``, ``silent_watch``,
+``self_clearance``, ``escape``). See :class:`PlannerSettings`."""
+
+from nehmo_core.planning.settings.groups import (
+    BACKENDS,
+    FAIL_SAFES,
+    SOLVERS,
+    FailSafeSettings,
+    MarginSettings,
+    OptSettings,
+    SolverSettings,
+)
+from nehmo_core.planning.settings.planner import (
+    PAPER_OPT,
+    PRESETS,
+    RENAMED,
+    PlannerSettings,
+    parse_assignments,
+)
+from nehmo_core.planning.settings.spec import Rule
+from nehmo_core.planning.settings.stage_groups import (
+    EscapeSettings,
+    ExactGuardSettings,
+    HoldSettings,
+    SelfClearanceSettings,
+    SilentWatchSettings,
+)
+
+__all__ = [
+    "BACKENDS",
+    "FAIL_SAFES",
+    "PAPER_OPT",
+    "PRESETS",
+    "RENAMED",
+    "SOLVERS",
+    "EscapeSettings",
+    "ExactGuardSettings",
+    "FailSafeSettings",
+    "HoldSettings",
+    "MarginSettings",
+    "OptSettings",
+    "PlannerSettings",
+    "Rule",
+    "SelfClearanceSettings",
+    "SilentWatchSettings",
+    "SolverSettings",
+    "parse_assignments",
+]

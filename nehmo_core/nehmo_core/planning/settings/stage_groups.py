@@ -1,0 +1,178 @@
+"""The settings of the planner's stages beyond the paper, one group per stage.
+
+Each group names the module of its stage; the ``paper`` preset turns every one of them off.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from nehmo_core.errors import InvalidValueError
+from nehmo_core.planning.settings.spec import check_group, setting
+
+__all__ = [
+    "EscapeSettings",
+    "ExactGuardSettings",
+    "HoldSettings",
+    "SelfClearanceSettings",
+    "SilentWatchSettings",
+]
+
+
+@dataclass(frozen=True)
+class HoldSettings:
+    """Announced speed bounds (``planning/stages/speed_bounds.py``).
+
+    An arm within ``tolerance`` of its goal announces ``bound`` (a share of ū) and keeps its
+    commands within it until it leaves ``release``, gets a new goal or a peer breaks
+    V(bound·t_plan) ≥ ε with it (half its settled margin for a peer that announces), announcing
+    the withdrawal ``release_ticks`` commands ahead; peers that keep their announcement are
+    planned against V(k·t_safe). ``bound`` = 1: announce nothing (the paper).
+    """
+
+    bound: float = setting(
+        0.2, "speed bound announced at the goal, share of u_max (1: none, the paper)", ge=0, le=1
+    )
+    tolerance: float = setting(
+        0.05, "goal distance (L2) within which the bound is announced", "rad", gt=0
+    )
+    # a holding arm pushed off its goal keeps its bound up to release from it, so the pushing
+    # peer can pass; 2·tolerance withdrew it early and both arms fled in turns
+    release: float = setting(
+        0.4, "goal distance (L2) beyond which a holding arm withdraws its bound", "rad", gt=0
+    )
+    release_ticks: int = setting(
+        2, "commands between announcing a withdrawal and moving faster", ge=1
+    )
+    # with certified margins, rows against a peer that announced a bound keep min(raised
+    # epsilon, max(settled_epsilon, their model's δ at bound·t_safe)); 1 cm, the exact guard's
+    # gap (0.05 m before the guard: a learned distance may read 3 cm at contact; 2 cm until
+    # five-UR5 goal sets 1-2 cm apart were seen to end stuck)
+    settled_epsilon: float = setting(
+        0.01, "floor of the margin against a peer that announced a speed bound", "m", gt=0, le=1
+    )
+
+    def __post_init__(self) -> None:
+        check_group(self, "hold")
+        if not self.release >= self.tolerance:
+            raise InvalidValueError(
+                "hold.release", f"must be >= hold.tolerance ({self.tolerance}) [rad]", self.release
+            )
+
+
+@dataclass(frozen=True)
+class ExactGuardSettings:
+    """The exact-geometry guard beside holding peers (``planning/stages/exact_guard.py``)."""
+
+    gap: float = setting(
+        0.01,
+        "exact clearance kept to holding peers; threat distance when holding (0: off)",
+        "m",
+        ge=0,
+        le=1,
+    )
+    # the learned values err by a few centimetres; a step moves the arm's points a few
+    # centimetres at most
+    near: float = setting(0.15, "only peers whose V now reads below this are checked", "m", gt=0)
+    scales: tuple[float, ...] = setting(
+        (1.0, 0.5, 0.25),
+        "shares of a step tried in turn (none fits: the arm stays still)",
+        gt=0,
+        le=1,
+    )
+
+    def __post_init__(self) -> None:
+        check_group(self, "exact_guard")
+
+
+@dataclass(frozen=True)
+class SilentWatchSettings:
+    """The silent-path watch (``planning/stages/silent_peers.py``).
+
+    A peer that announces nothing is extrapolated ``lookahead`` along its observed joint
+    velocity; when V(t_plan) at a point of that path is below ``clearance`` and more than
+    ``approach`` below the current V, the step's target is up ∂V/∂q_own there instead of the
+    goal. The V rows are unchanged.
+    """
+
+    lookahead: float = setting(
+        2.0, "how far a silent peer's observed velocity is extrapolated (0: off)", "s", ge=0
+    )
+    clearance: float = setting(
+        0.2, "V along a silent peer's path that the arm steps away from", "m", ge=0
+    )
+    approach: float = setting(
+        0.02, "a predicted V this far below the current one is an approach", "m", ge=0
+    )
+    points: tuple[float, ...] = setting(
+        (0.25, 0.5, 0.75, 1.0),
+        "shares of lookahead at which the peer's path is evaluated",
+        gt=0,
+        le=1,
+    )
+
+    def __post_init__(self) -> None:
+        check_group(self, "silent_watch")
+
+
+@dataclass(frozen=True)
+class SelfClearanceSettings:
+    """Self-collision velocity dampers (``planning/stages/self_clearance.py``): link pairs
+    closer than ``influence`` may close at most ``gain`` of their distance above ``safety`` per
+    planned step, in the step and in the fail-safe."""
+
+    enabled: bool = setting(
+        True, "self-collision rows in Opt and the fail-safe (false: the paper's Opt)"
+    )
+    influence: float = setting(0.10, "link pairs closer than this get a row", "m", gt=0)
+    safety: float = setting(0.005, "distance the rows keep between links", "m", ge=0)
+    gain: float = setting(
+        0.5, "share of the distance above safety a pair may close per step", gt=0, le=1
+    )
+    # On the UR5's closed-loop joint paths of the planning-speed bench, 0.5 m asks 5.4 pairs per
+    # step against 7.7 at 0.15 m (a pair out of reach reads as at the reach, so a short reach
+    # brings it back soon)
+    query_reach: float = setting(
+        0.5,
+        "how far beyond influence a pair is queried before it is skipped until joints move",
+        "m",
+        gt=0,
+    )
+
+    def __post_init__(self) -> None:
+        check_group(self, "self_clearance")
+        if not self.influence > self.safety:
+            raise InvalidValueError(
+                "self_clearance.influence",
+                f"must be > self_clearance.safety ({self.safety})",
+                self.influence,
+            )
+
+
+@dataclass(frozen=True)
+class EscapeSettings:
+    """The stall escape (``planning/stages/stall_escape.py``).
+
+    After ``stall_ticks`` plan() calls in which the goal error fell by less than
+    ``stall_progress``·t_plan·ū while a V row was within ``stall_margin`` of ε, the arm follows
+    a random direction tangent to the critical pair's level set of V for ``escape_ticks`` calls
+    (doubled with every escape from the same trap, up to ``max_stretch`` times as long), then
+    heads for the goal again; an arm held at its goal that long yields: it steps up V's gradient
+    for ``yield_ticks`` calls.
+    """
+
+    enabled: bool = setting(True, "stall escape and yield at the goal (false: the paper's Opt)")
+    stall_ticks: int = setting(
+        12, "calls without progress against an active V row before an escape", ge=1
+    )
+    escape_ticks: int = setting(25, "calls of the first escape from a trap", ge=1)
+    yield_ticks: int = setting(12, "calls an arm held at its goal steps up V's gradient", ge=1)
+    max_stretch: int = setting(4, "longest escape, as a multiple of escape_ticks", ge=1)
+    stall_progress: float = setting(
+        0.1, "progress below this share of t_plan·ū per call is a stall", ge=0
+    )
+    stall_margin: float = setting(0.01, "a V row within this of ε is active", "m", ge=0)
+    seed: int = setting(0, "seed of the escape directions (with the arm id)", ge=0)
+
+    def __post_init__(self) -> None:
+        check_group(self, "escape")
