@@ -204,3 +204,34 @@ def test_test_files_mirror_the_packages_and_are_short() -> None:
     folders = {p.name for p in tests.iterdir() if p.is_dir() and p.name != "data"}
     packages = {p.name for p in CORE.iterdir() if (p / "__init__.py").exists()} | {"ros"}
     assert folders <= packages, f"test folders without a package: {sorted(folders - packages)}"
+
+
+#: numbers at module level in the stages and Opt that are not tunables: a meaning, a tolerance
+NOT_TUNABLE = {
+    "opt/peer_bounds.py": {"FULL_SPEED"},  # the announcement of an arm that promises nothing
+    "stages/self_clearance.py": {"MIN_GRADIENT"},  # a numerical floor of a row's gradient
+}
+
+
+def test_tunable_numbers_live_in_settings_groups() -> None:
+    """A number a user might tune sits in a settings group (with its unit and rule), not as a
+    module constant of a stage or of Opt."""
+    found = []
+    for sub in ("stages", "opt"):
+        for path in sorted((PLANNING / sub).glob("*.py")):
+            rel = f"{sub}/{path.name}"
+            for node in ast.parse(path.read_text()).body:
+                target = node.targets[0] if isinstance(node, ast.Assign) else None
+                if isinstance(node, ast.AnnAssign):
+                    target = node.target
+                value = getattr(node, "value", None)
+                if not isinstance(target, ast.Name) or value is None:
+                    continue
+                numbers = [n for n in ast.walk(value) if isinstance(n, ast.Constant)]
+                numeric = numbers and all(
+                    isinstance(n.value, int | float) and not isinstance(n.value, bool)
+                    for n in numbers
+                )
+                if numeric and target.id not in NOT_TUNABLE.get(rel, set()):
+                    found.append(f"{rel}:{node.lineno} {target.id}")
+    assert not found, f"module constants that belong in a settings group: {found}"

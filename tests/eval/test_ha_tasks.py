@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import shutil
 from pathlib import Path
@@ -20,7 +21,7 @@ from nehmo_core.eval.ha_tasks import (
     pair_distances,
 )
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.stages import exact_guard, self_clearance
+from nehmo_core.geometry.world_pool import WORLDS
 
 TASKS = Path(__file__).parents[1] / "data" / "ha_tasks"
 
@@ -78,11 +79,10 @@ def test_starts_and_goals_are_collision_free_for_our_geometry() -> None:
 
 
 def _pybullet_clients() -> set[int]:
-    """Connected PyBullet clients, less the worlds a process keeps on purpose (one self-clearance
-    world per robot, the exact guard's two most recent cells)."""
-    kept = {w.world.client for w in self_clearance._WORLDS.values()}
-    kept |= {w.client for w in exact_guard._WORLDS.values()}
-    return {i for i in range(256) if pb.isConnected(physicsClientId=i)} - kept
+    """Connected PyBullet clients once unreachable planners are collected (the worlds their
+    stages share close with the last of them)."""
+    gc.collect()
+    return {i for i in range(256) if pb.isConnected(physicsClientId=i)}
 
 
 def test_evaluate_tasks_writes_rows_per_arm_count(tmp_path: Path) -> None:
@@ -91,14 +91,15 @@ def test_evaluate_tasks_writes_rows_per_arm_count(tmp_path: Path) -> None:
     for name in ("135003.json", "135011.json", "135000.json"):  # 1 arm, 2 arms, obstacles
         shutil.copy(TASKS / name, tasks / name)
     out = tmp_path / "out"
-    before = _pybullet_clients()
+    before, worlds = _pybullet_clients(), len(WORLDS)
     code = evaluate_main(
         ["--tasks", str(tasks), "--planners", "naive,nehmo", "--out", str(out), "--no-progress"]
     )
     assert code == 0
     # every task's simulator and planners let their PyBullet clients go (a task run once kept
-    # ~120 MB per four-arm task until the worker ended)
+    # ~120 MB per four-arm task until the worker ended), the shared worlds of the stages too
     assert _pybullet_clients() == before
+    assert len(WORLDS) == worlds
     summary = json.loads((out / "summary.json").read_text())
     assert summary["skipped"] == [{"task": "135000", "arms": 3, "reason": "obstacles"}]
     rows = {r["row"]: r for r in summary["rows"]}

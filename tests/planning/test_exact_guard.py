@@ -86,9 +86,9 @@ def test_the_guard_keeps_the_floor_where_the_learned_rows_would_not(
 def test_the_guard_leaves_steps_alone_without_a_held_peer_or_when_off(world: CellWorld) -> None:
     settings = PlannerSettings().override({"exact_guard.gap": FLOOR})
     q, u = np.zeros(6), np.full(6, 0.5)
-    assert guard_step(CELL, OWN, q, u, {}, settings) == 1.0
+    assert guard_step(world, OWN, q, u, {}, settings) == 1.0
     assert (
-        guard_step(CELL, OWN, q, u, {PEER: np.zeros(6)}, settings.override({"exact_guard.gap": 0}))
+        guard_step(world, OWN, q, u, {PEER: np.zeros(6)}, settings.override({"exact_guard.gap": 0}))
         == 1
     )
     with pytest.raises(InvalidValueError, match=r"exact_guard\.gap.*\[0, 1\]"):
@@ -100,8 +100,8 @@ def test_a_step_that_opens_the_gap_passes_even_below_the_floor(world: CellWorld)
     settings = PlannerSettings().override({"exact_guard.gap": FLOOR})
     toward, away = (goal - start), (start - goal)
     step = 0.5 / np.abs(toward).max()  # full speed on the largest joint
-    assert guard_step(CELL, OWN, goal, away * step, {PEER: peer}, settings) == 1.0
-    assert guard_step(CELL, OWN, goal, toward * step, {PEER: peer}, settings) < 1.0
+    assert guard_step(world, OWN, goal, away * step, {PEER: peer}, settings) == 1.0
+    assert guard_step(world, OWN, goal, toward * step, {PEER: peer}, settings) < 1.0
 
 
 def test_a_holding_arm_withdraws_from_a_full_speed_peer_within_the_floor(
@@ -117,8 +117,8 @@ def test_a_holding_arm_withdraws_from_a_full_speed_peer_within_the_floor(
         world.set_configuration({OWN: q, PEER: peer})
         if not 0.005 < world.distance(OWN, PEER) < FLOOR or _folded(world):
             continue
-        assert closer_than(CELL, OWN, q, {PEER: peer}, FLOOR)
-        assert not closer_than(CELL, OWN, q, {PEER: peer}, 0.004)
+        assert closer_than(world, OWN, q, {PEER: peer}, FLOOR)
+        assert not closer_than(world, OWN, q, {PEER: peer}, 0.004)
         bounds = []
         for guard in (0.0, FLOOR):
             settings = PlannerSettings().override(

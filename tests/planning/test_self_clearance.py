@@ -8,6 +8,7 @@ import pytest
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.geometry.world_pool import WorldPool
 from nehmo_core.planning.settings import PlannerSettings, SelfClearanceSettings
 from nehmo_core.planning.stages import self_clearance
 from nehmo_core.planning.stages.self_clearance import SelfClearance, project_step
@@ -27,7 +28,7 @@ def clearance(request: pytest.FixtureRequest) -> SelfClearance:
 def test_instances_share_one_world_per_robot_and_the_last_close_ends_it(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(self_clearance, "_WORLDS", {})  # no users left by other tests
+    monkeypatch.setattr(self_clearance, "WORLDS", WorldPool())  # no users left by other tests
     a, b = SelfClearance(load_robot("ur5")), SelfClearance(load_robot("ur5"))
     client = a._world.client
     assert b._world is a._world

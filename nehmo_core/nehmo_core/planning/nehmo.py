@@ -26,11 +26,7 @@ from numpy.typing import ArrayLike
 
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.opt.fail_safe import HjiFailSafe
-from nehmo_core.planning.opt.interface import (
-    PlanResult,
-    Telemetry,
-    one_joint_vector,
-)
+from nehmo_core.planning.opt.interface import PlanResult, Telemetry, one_joint_vector
 from nehmo_core.planning.opt.pairs import PeerPairs
 from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import (
@@ -95,6 +91,11 @@ class NehmoPlanner:
             if s.name == name:
                 return s
         raise KeyError(f"no stage {name!r} in this planner (on: {[s.name for s in self.stages]})")
+
+    def close(self) -> None:
+        """Release what the stages hold (shared PyBullet worlds; also when garbage-collected)."""
+        for stage in (*self.stages, self._fallback):
+            stage.close()
 
     def reset(self) -> None:
         """Forget everything of the last episode (stages included)."""

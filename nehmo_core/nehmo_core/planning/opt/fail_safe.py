@@ -27,6 +27,9 @@ class HjiFailSafe:
     def reset(self) -> None:
         """It keeps no state."""
 
+    def close(self) -> None:
+        """It holds nothing."""
+
     def command(self, now: PeerValues, u_max: float) -> np.ndarray:
         g = now.grads[now.critical][: self.dof]
         u = u_max * np.sign(g)

@@ -85,11 +85,14 @@ class Host(Protocol):
 
 
 class Stage(Protocol):
-    """Every stage has a name (its settings group) and state it can forget."""
+    """Every stage has a name (its settings group), state it can forget, and resources it
+    releases when its planner is closed (a shared PyBullet world; most hold none)."""
 
     name: str
 
     def reset(self) -> None: ...
+
+    def close(self) -> None: ...
 
 
 class Announcer(Stage, Protocol):

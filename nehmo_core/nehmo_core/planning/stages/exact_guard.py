@@ -14,38 +14,30 @@ arms are already closer and the step does not bring them closer still. The peer'
 within its bound is left to the value rows; a peer that breaks its bound is fled from by the
 threat test, which checks the real geometry too (:func:`closer_than`).
 
-One PyBullet world per cell is shared by the planners of a process (the two most recent cells
-are kept; the planners of an older cell get a fresh one if they plan again).
+One PyBullet world per cell is shared by the planners of a process that use it
+(:mod:`nehmo_core.geometry.world_pool`); it closes with the last of them.
 """
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from collections.abc import Mapping
 
 import numpy as np
 
 from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.geometry.world_pool import WORLDS, Lease
 from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
-__all__ = ["ExactGuard", "closer_than", "guard_step", "prepare"]
-
-_WORLDS: OrderedDict[Cell, CellWorld] = OrderedDict()  # cells compare by value
-_KEEP = 2
+__all__ = ["ExactGuard", "cell_world", "closer_than", "guard_step"]
 
 
-def _world(cell: Cell) -> CellWorld:
-    world = _WORLDS.get(cell)
-    if world is None:
-        world = _WORLDS[cell] = CellWorld(cell)
-        while len(_WORLDS) > _KEEP:
-            _WORLDS.popitem(last=False)[1].close()
-    _WORLDS.move_to_end(cell)
-    return world
+def cell_world(cell: Cell, owner: object) -> Lease:
+    """The shared PyBullet world of ``cell``, held for ``owner``."""
+    return WORLDS.lease(("cell", cell), lambda: CellWorld(cell), owner)
 
 
 def _closest(
@@ -56,13 +48,8 @@ def _closest(
     return min(world.distance(arm_id, p, cutoff) for p in peers)
 
 
-def prepare(cell: Cell) -> None:
-    """Build ``cell``'s world now (a planner does it when built, not in its first tick)."""
-    _world(cell)
-
-
 def guard_step(
-    cell: Cell,
+    world: CellWorld,
     arm_id: str,
     q: np.ndarray,
     u: np.ndarray,
@@ -76,7 +63,6 @@ def guard_step(
     floor, step = settings.exact_guard.gap, u * settings.opt.t_plan
     if not held or floor <= 0.0:
         return 1.0
-    world = _world(cell)
     cutoff = 2.0 * floor + 0.05
     world.set_configuration(held)
     now = _closest(world, arm_id, q, held, cutoff)
@@ -88,7 +74,7 @@ def guard_step(
 
 
 def closer_than(
-    cell: Cell, arm_id: str, q: np.ndarray, peers: Mapping[str, np.ndarray], floor: float
+    world: CellWorld, arm_id: str, q: np.ndarray, peers: Mapping[str, np.ndarray], floor: float
 ) -> bool:
     """Whether arm ``arm_id`` at ``q`` is closer than ``floor`` [m] to a peer of ``peers``
     (``{peer: q}``), with the real geometry. A holding arm withdraws from a peer that brought
@@ -97,7 +83,6 @@ def closer_than(
     between two) would otherwise never count as a threat."""
     if not peers or floor <= 0.0:
         return False
-    world = _world(cell)
     world.set_configuration(peers)
     return _closest(world, arm_id, q, peers, 2.0 * floor) < floor
 
@@ -110,8 +95,13 @@ class ExactGuard:
     def __init__(self, host: Host) -> None:
         self.host = host
         self.shortened = 0
-        if host.settings.hold.bound < FULL_SPEED and host.pairs:
-            prepare(host.cell)  # build the world now, not in the first tick
+        # built now, not in the first tick; no constrained peer, nothing to guard against
+        self._lease = cell_world(host.cell, self) if host.pairs else None
+
+    def close(self) -> None:
+        """Give the cell's world back (it closes with its last user)."""
+        if self._lease is not None:
+            self._lease.release()
 
     def reset(self) -> None:
         self.shortened = 0
@@ -120,11 +110,13 @@ class ExactGuard:
         """``u`` shortened by :func:`guard_step` against the peers near now that keep an
         announced bound (they take part in the announcements)."""
         host = self.host
+        if self._lease is None:
+            return u
         near_v = host.settings.exact_guard.near
         near = [p for p, v in zip(now.ids, now.values, strict=True) if v < near_v]
         held = {
             p: tick.peers[p] for p in near if p in tick.participants and tick.bounds[p] < FULL_SPEED
         }
-        share = guard_step(host.cell, host.arm_id, tick.q, u, held, host.settings)
+        share = guard_step(self._lease.world, host.arm_id, tick.q, u, held, host.settings)
         self.shortened += share < 1.0
         return u * share

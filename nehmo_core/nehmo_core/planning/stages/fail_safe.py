@@ -181,6 +181,9 @@ class MaximinFallback:
     def reset(self) -> None:
         self.critical.reset()
 
+    def close(self) -> None:
+        """It holds nothing."""
+
     def command(self, now: PeerValues, u_max: float) -> np.ndarray:
         if len(now.ids) < 2:
             return self.single.command(now, u_max)

@@ -24,6 +24,7 @@ import numpy as np
 import pybullet as pb
 
 from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.geometry.world_pool import WORLDS
 from nehmo_core.planning.opt.problem import LinearRows, project_step
 from nehmo_core.planning.settings import SelfClearanceSettings
 from nehmo_core.planning.stages.self_clearance_setup import distance_slopes, witness_order
@@ -44,21 +45,9 @@ class SelfClearanceRows(LinearRows):
 MIN_GRADIENT = 1e-4
 """Rows whose ``|∂d/∂q|`` is below this [m/rad] in every joint are left out."""
 
-_WITNESS_ORDER: dict[RobotModel, dict[tuple[str, str], bool]] = {}
-"""Per robot: :meth:`SelfClearance._witness_order` (found once per process, from the robot's
-own geometry)."""
 
-
-@dataclass
-class _SharedWorld:
-    world: CellWorld
-    users: int = 0
-
-
-_WORLDS: dict[RobotModel, _SharedWorld] = {}
-"""Per robot: one PyBullet world that every :class:`SelfClearance` of the process shares (each
-query sets the joints first), and how many instances use it. A world per instance would keep
-a PyBullet client (~30 MB) alive for every planner ever built, since planners are not closed."""
+def _self_world(robot: RobotModel) -> CellWorld:
+    return CellWorld(Cell(f"self_{robot.name}", (ArmSpec("self", robot, Pose()),)))
 
 
 def _empty_rows(n: int) -> SelfClearanceRows:
@@ -84,13 +73,8 @@ class SelfClearance:
         self.robot = robot
         self.influence, self.safety, self.gain = s.influence, s.safety, s.gain
         self.query_reach = s.query_reach
-        shared = _WORLDS.get(robot)
-        if shared is None:
-            arm = ArmSpec("self", robot, Pose())
-            shared = _WORLDS[robot] = _SharedWorld(CellWorld(Cell(f"self_{robot.name}", (arm,))))
-        shared.users += 1
-        self._world = shared.world
-        self._closed = False
+        self._lease = WORLDS.lease(("self", robot), lambda: _self_world(robot), self)
+        self._world = self._lease.world
         self._client = self._world.client
         self._body = self._world.body("self")
         self._pairs = [
@@ -129,21 +113,15 @@ class SelfClearance:
         self._ref_d = np.zeros(len(self._pairs))
         self.queries = 0  # pair queries made (a pair skipped by its bound costs none)
         self._swapped = {(a, b): False for a, b, _, _ in self._pairs}
-        if robot not in _WITNESS_ORDER:
-            _WITNESS_ORDER[robot] = witness_order(self)
-        self._swapped = _WITNESS_ORDER[robot]
+        facts = self._lease.facts  # the witness order, found once per world
+        if "witness_order" not in facts:
+            facts["witness_order"] = witness_order(self)
+        self._swapped = facts["witness_order"]
         self._last = None  # rows computed while the order was being found
 
     def close(self) -> None:
-        """Release the shared world (closed with its last user)."""
-        if self._closed:
-            return
-        self._closed = True
-        shared = _WORLDS[self.robot]
-        shared.users -= 1
-        if shared.users == 0:
-            del _WORLDS[self.robot]
-            self._world.close()
+        """Release the shared world (closed with its last user; twice is harmless)."""
+        self._lease.release()
 
     def _gradients(
         self,

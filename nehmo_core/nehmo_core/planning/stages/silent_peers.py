@@ -138,6 +138,9 @@ class SilentPeers:
     def reset(self) -> None:
         self.watch.reset()
 
+    def close(self) -> None:
+        """It holds nothing."""
+
     def begin(self, tick: Tick) -> None:
         """Nothing to do before the tick."""
 

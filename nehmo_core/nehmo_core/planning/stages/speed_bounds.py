@@ -29,7 +29,7 @@ import numpy as np
 from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.tick import Tick
-from nehmo_core.planning.stages.exact_guard import closer_than
+from nehmo_core.planning.stages.exact_guard import cell_world, closer_than
 
 __all__ = ["HoldAnnouncer"]
 
@@ -42,7 +42,15 @@ class HoldAnnouncer:
     def __init__(self, host: Host) -> None:
         self.host = host
         self.settings = host.settings
+        # the threat test's real geometry (the exact guard's world of the cell)
+        guarded = host.settings.exact_guard.gap > 0 and host.pairs
+        self._lease = cell_world(host.cell, self) if guarded else None
         self.reset()
+
+    def close(self) -> None:
+        """Give the cell's world back (it closes with its last user)."""
+        if self._lease is not None:
+            self._lease.release()
 
     def reset(self) -> None:
         # this arm's recent announcements (newest last); its commands keep the smallest
@@ -94,4 +102,6 @@ class HoldAnnouncer:
             for p, v in zip(ids, slow.values, strict=True)
             if v < s.exact_guard.near
         }
-        return closer_than(host.cell, host.arm_id, tick.q, near, s.exact_guard.gap)
+        if self._lease is None:
+            return False
+        return closer_than(self._lease.world, host.arm_id, tick.q, near, s.exact_guard.gap)

@@ -42,6 +42,9 @@ class StallEscape:
         self.rng = np.random.default_rng(seed)
         self.clear()
 
+    def close(self) -> None:
+        """It holds nothing."""
+
     def clear(self) -> None:
         """Forget the stall and escape state (on reset() and whenever the goal changes; the
         random stream is kept)."""
