@@ -103,6 +103,9 @@ def _episode(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult,
     planners = build_planners(
         cell, kinds, task.scenario, 1.0 / settings.rate, registry, config.planner_settings
     )
+    # the last task's planners are let go only now: the shared worlds both use (a robot's own
+    # world for self-clearance, ~0.5 s to build) stay open from one task to the next
+    _STATE["planners"] = planners
     used = {
         "value_models": {
             k: registry.described.get(k, []) for k in set(kinds.values()) if k in OPT_KINDS
@@ -187,6 +190,7 @@ def run_tasks(
             if on_row is not None:
                 on_row(summary)
     finally:
+        _STATE.pop("planners", None)  # an in-process run gives its last planners' worlds back
         if executor is not None:
             executor.shutdown(cancel_futures=True)
     return task_summary(config, summaries, tasks, skipped, workers, time.perf_counter() - start)
