@@ -141,6 +141,11 @@ def _run_tasks(args: argparse.Namespace, rows: list[str], settings: PlannerSetti
         print(f"tasks {row['row']}: {format_metrics(ours)}", file=sys.stderr)
 
     summary = run_tasks(config, rows, tasks, args.workers, not args.no_progress, report)
+    if summary["skipped"]:
+        reasons = "; ".join(f"{s['task']}: {s['reason']}" for s in summary["skipped"])
+        print(
+            f"skipped {len(summary['skipped'])} of {len(tasks)} tasks ({reasons})", file=sys.stderr
+        )
     path = args.out / "summary.json"
     path.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
     path.with_suffix(".md").write_text(markdown(summary))

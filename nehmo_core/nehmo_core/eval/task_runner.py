@@ -5,7 +5,9 @@ builds its planners for that cell; value models are loaded once per worker (the 
 them, and the UR5 pairs at any base distance use the pose-conditioned ``ur5_ur5_any``). Success
 follows our rule (every arm within 0.1 rad, joint-space L2 norm, of its goal at once, within the
 time limit, no collision); the episodes last :data:`TIME_LIMIT` s like theirs. Tasks with
-obstacles are listed and skipped: the planners model arms only.
+obstacles, and tasks with a pair of arms in reach of each other that no loaded value model
+covers (for any Opt row asked for), are listed with the reason and skipped by every row: they
+count in no row's denominator and never as a success, and the other tasks run.
 
 A task whose episode raises or whose log cannot be read stays in its row as an ``error``
 (a failure with its reason); the row goes on. ``OUT/summary.json`` keeps the setups' row
@@ -24,6 +26,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from nehmo_core.eval.batch import init_worker
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.ha_tasks import HaTask, check_joint_convention, pair_distances
@@ -37,6 +41,7 @@ from nehmo_core.eval.planners import build_planners, unmodelled_peers
 from nehmo_core.eval.report import error_notes, json_safe
 from nehmo_core.eval.setups import OPT_KINDS, parse_row, row_slug
 from nehmo_core.logs import remove_bag
+from nehmo_core.planning.models.pair_frame import constrained_pairs
 from nehmo_core.planning.models.registry import ModelRegistry, ValueModelSource
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.sim.cell_sim import CellSimulator
@@ -129,15 +134,38 @@ def _episode(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult,
     return result, used
 
 
-def _runnable(tasks: Sequence[HaTask]) -> tuple[list[HaTask], list[dict[str, Any]]]:
-    """Tasks to run, and the skipped ones with the reason."""
+def _uncovered(task: HaTask, config: TaskConfig, rows: Sequence[str]) -> str | None:
+    """Why an Opt row cannot plan ``task`` (a pair in reach that no loaded model fits), or
+    None. Every row then skips the task, so the rows compare on one task set."""
+    registry = _registry(config)
+    cell, margin = task.cell, config.planner_settings.opt.reach_margin
+    kinds = {k for row in rows for k in parse_row(row, cell).values() if k in OPT_KINDS}
+    for kind in sorted(kinds):
+        geometry = [m.geometry for m in registry.models_for(kind, cell)]
+        for arm in cell.arm_ids:
+            uncovered = constrained_pairs(cell, arm, geometry, margin)[2]
+            if uncovered:
+                peer = uncovered[0]
+                gap = np.linalg.norm(np.subtract(cell.arm(peer).base.xyz, cell.arm(arm).base.xyz))
+                return (
+                    f"no {kind} value model covers the pair {arm}-{peer} "
+                    f"(bases {gap:.2f} m apart, within reach)"
+                )
+    return None
+
+
+def _runnable(
+    tasks: Sequence[HaTask], config: TaskConfig, rows: Sequence[str]
+) -> tuple[list[HaTask], list[dict[str, Any]]]:
+    """Tasks to run, and the skipped ones with the reason (obstacles; a pair no model covers)."""
     keep, skipped = [], []
     for task in tasks:
         check_joint_convention(task)
-        if task.obstacles:
-            skipped.append({"task": task.task_id, "arms": task.arm_count, "reason": "obstacles"})
-        else:
+        reason = "obstacles" if task.obstacles else _uncovered(task, config, rows)
+        if reason is None:
             keep.append(task)
+        else:
+            skipped.append({"task": task.task_id, "arms": task.arm_count, "reason": reason})
     return keep, skipped
 
 
@@ -153,7 +181,7 @@ def run_tasks(
     row by row)."""
     from tqdm import tqdm
 
-    runnable, skipped = _runnable(tasks)
+    runnable, skipped = _runnable(tasks, config, rows)
     for row in rows:  # fail early on a bad row
         for task in runnable:
             parse_row(row, task.cell)
