@@ -1,0 +1,191 @@
+"""Every stage beyond the paper switched off alone, beside the full planner: does it earn its place?
+
+    ./run python bench/ablation.py run --out out/ablation                # the runs (resumable)
+    ./run python bench/ablation.py report --out out/ablation             # docs/ablation.md
+
+Rows: the five- and three-UR5 setups and the UR5 beside the reckless Kinova (``nehmo/reckless``,
+challenging scenarios), each on two fresh scenario seeds (``--seeds``, 50 episodes each by
+default), and Ha et al.'s shared tasks (46 without obstacles). Variants: the full ``nehmo``
+planner and one per stage with that stage off (``VARIANTS``). Two workers, the real 40 ms solve
+deadline, as the tables run.
+
+The verdict per stage: it earns its place when, in some row, switching it off lowers SR by more
+than two standard errors of the difference (pooled over the seeds), or adds a collision (between
+arms or of an arm with itself) where the full planner has fewer. A stage that does neither in any
+row is a candidate for removal.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGE = ROOT / "docs" / "ablation.md"
+RESULTS = ROOT / "bench" / "results" / "ablation.json"
+
+#: variant → (dotted planner settings, the stage it switches off)
+VARIANTS: dict[str, tuple[dict[str, str], str]] = {
+    "full": ({}, "none (the default `nehmo` planner)"),
+    "no_hold": ({"hold.bound": "1.0"}, "hold announcer (`hold`)"),
+    "no_exact_guard": ({"exact_guard.gap": "0"}, "exact guard (`exact_guard`)"),
+    "no_self_clearance": ({"self_clearance.enabled": "false"}, "self-clearance rows"),
+    "no_escape": ({"escape.enabled": "false"}, "stall escape (`escape`)"),
+    "no_silent_watch": ({"silent_watch.lookahead": "0"}, "silent-path watch (`silent_watch`)"),
+    "single_fail_safe": ({"fail_safe.kind": "single"}, "maximin fail-safe (`fail_safe`)"),
+}
+#: row name → (setup, planners row); ``ha`` runs Ha et al.'s tasks instead of a setup
+ROWS: dict[str, tuple[str, str]] = {
+    "five_ur5": ("five_ur5", "nehmo"),
+    "triple_ur5": ("triple_ur5", "nehmo"),
+    "ur5_kinova_challenging": ("ur5_kinova_challenging", "nehmo/reckless"),
+    "ha": ("ha", "nehmo"),
+}
+HA_TASKS = ROOT.parent / "shared" / "ha_benchmark" / "tasks"
+
+
+def _dirs(out: Path, row: str, seeds: list[int]) -> list[tuple[int | None, Path]]:
+    if row == "ha":
+        return [(None, out / "ha")]
+    return [(s, out / f"{row}_s{s}") for s in seeds]
+
+
+def run(out: Path, seeds: list[int], episodes: int, tasks: Path) -> None:
+    for row, (setup, planners) in ROWS.items():
+        for variant, (settings, _) in VARIANTS.items():
+            for seed, base in _dirs(out, row, seeds):
+                dest = base / variant
+                if (dest / "summary.json").exists():
+                    continue
+                args = [sys.executable, "-m", "nehmo_core.eval.cli", "--planners", planners]
+                if seed is None:
+                    args += ["--tasks", str(tasks)]
+                else:
+                    args += ["--setup", setup, "--episodes", str(episodes), "--seed", str(seed)]
+                for key, value in settings.items():
+                    args += ["--planner-setting", f"{key}={value}"]
+                args += ["--workers", "2", "--no-progress", "--out", str(dest)]
+                print(f"{row} seed {seed} {variant}", file=sys.stderr, flush=True)
+                subprocess.run(args, check=False)  # an error row stays visible in the report
+
+
+def _counts(summary: dict[str, Any]) -> dict[str, int]:
+    ours = summary["rows"][0]["ours"]
+    return {
+        "episodes": ours["episodes"],
+        "successes": ours["successes"],
+        "inter_arm": ours["collisions"] - ours["self_collisions"],
+        "self": ours["self_collisions"],
+        "stuck": ours["stuck"],
+        "errors": ours["errors"],
+    }
+
+
+def collect(out: Path, seeds: list[int]) -> dict[str, dict[str, dict[str, Any]]]:
+    """row → variant → per-seed counts and their pooled sum (missing runs are left out)."""
+    table: dict[str, dict[str, dict[str, Any]]] = {}
+    for row in ROWS:
+        for variant in VARIANTS:
+            per_seed = {}
+            for seed, base in _dirs(out, row, seeds):
+                path = base / variant / "summary.json"
+                if path.exists():
+                    per_seed["tasks" if seed is None else str(seed)] = _counts(
+                        json.loads(path.read_text())
+                    )
+            if per_seed:
+                pooled = {
+                    k: sum(c[k] for c in per_seed.values()) for k in next(iter(per_seed.values()))
+                }
+                table.setdefault(row, {})[variant] = {"seeds": per_seed, "pooled": pooled}
+    return table
+
+
+def _sr(c: dict[str, int]) -> float:
+    return 100.0 * c["successes"] / max(c["episodes"], 1)
+
+
+def verdicts(table: dict[str, dict[str, dict[str, Any]]]) -> dict[str, list[str]]:
+    """variant → the rows where switching its stage off mattered (and how)."""
+    found: dict[str, list[str]] = {v: [] for v in VARIANTS if v != "full"}
+    for row, variants in table.items():
+        if "full" not in variants:
+            continue
+        full = variants["full"]["pooled"]
+        for variant, data in variants.items():
+            if variant == "full":
+                continue
+            off = data["pooled"]
+            p1, p2 = full["successes"] / full["episodes"], off["successes"] / off["episodes"]
+            se = math.sqrt(p1 * (1 - p1) / full["episodes"] + p2 * (1 - p2) / off["episodes"])
+            if p1 - p2 > 2 * se and p1 > p2:
+                found[variant].append(f"{row}: SR {_sr(full):.0f} → {_sr(off):.0f} %")
+            for kind, label in (
+                ("inter_arm", "collisions between arms"),
+                ("self", "self-collisions"),
+            ):
+                if off[kind] > full[kind]:
+                    found[variant].append(f"{row}: {label} {full[kind]} → {off[kind]}")
+    return found
+
+
+def _cell(c: dict[str, int]) -> str:
+    n = c["episodes"]
+    text = f"{_sr(c):.0f} / {c['inter_arm']} / {c['self']} / {100 * c['stuck'] / max(n, 1):.0f}"
+    return text + (f" ({c['errors']} err)" if c["errors"] else "")
+
+
+def markdown(table: dict[str, dict[str, dict[str, Any]]], seeds: list[int], note: str) -> str:
+    out = [
+        "# Ablation: each stage beyond the paper switched off alone\n\n",
+        "Written by `./run python bench/ablation.py report` from the runs of "
+        "`bench/ablation.py run` (how they are run and judged: the script's docstring). "
+        f"Scenario seeds {', '.join(map(str, seeds))} (fresh: never used to tune anything), "
+        "and Ha et al.'s 46 shared tasks without obstacles.",
+        f" {note}\n\n" if note else "\n\n",
+        "Each cell: SR % / collisions between arms (episodes) / self-collisions (episodes) / "
+        "stuck %, pooled over the seeds; the per-seed numbers are in "
+        "[`bench/results/ablation.json`](../bench/results/ablation.json).\n\n",
+    ]
+    rows = [r for r in ROWS if r in table]
+    sizes = {r: next(iter(table[r].values()))["pooled"]["episodes"] for r in rows}
+    out.append("| stage off | " + " | ".join(f"{r} ({sizes[r]})" for r in rows) + " |\n")
+    out.append("|---" * (len(rows) + 1) + "|\n")
+    for variant, (_, label) in VARIANTS.items():
+        cells = [_cell(table[r][variant]["pooled"]) if variant in table[r] else "–" for r in rows]
+        out.append(f"| {label} | " + " | ".join(cells) + " |\n")
+    out.append("\n## Verdicts\n\n")
+    for variant, reasons in verdicts(table).items():
+        label = VARIANTS[variant][1]
+        if reasons:
+            out.append(f"- **{label}** earns its place: {'; '.join(reasons)}.\n")
+        else:
+            out.append(f"- **{label}**: no row changed beyond noise when it was off.\n")
+    return "".join(out)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("action", choices=("run", "report"))
+    parser.add_argument("--out", type=Path, default=ROOT / "out" / "ablation")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[49, 50])
+    parser.add_argument("--episodes", type=int, default=50, help="episodes per seed and row")
+    parser.add_argument("--tasks", type=Path, default=HA_TASKS, help="Ha et al.'s task files")
+    parser.add_argument("--note", default="", help="a sentence added to the page's introduction")
+    args = parser.parse_args()
+    if args.action == "run":
+        run(args.out, args.seeds, args.episodes, args.tasks)
+        return
+    table = collect(args.out, args.seeds)
+    RESULTS.write_text(json.dumps({"seeds": args.seeds, "rows": table}, indent=1) + "\n")
+    PAGE.write_text(markdown(table, args.seeds, args.note))
+    print(f"wrote {PAGE} and {RESULTS}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
