@@ -10,11 +10,10 @@ Planner settings nest by group, so ``fail_safe: {slack: 0.005}`` sets the parame
 
 from __future__ import annotations
 
-import argparse
 import math
-from pathlib import Path
 from typing import Any
 
+from nehmo_core.planning.settings.reference import write_generated
 from nehmo_ros.arm_planner import PARAMS
 from nehmo_ros.node_support import Param
 
@@ -69,12 +68,8 @@ def parameter_file() -> str:
 
 def main(argv: list[str] | None = None) -> None:
     """Write the file to the path given (pybullet's banner on stdout cannot end up in it)."""
-    parser = argparse.ArgumentParser(
-        prog="python -m nehmo_ros.param_file",
-        description="write the arm_planner parameter file from the node's declarations",
-    )
-    parser.add_argument("path", type=Path, help="the YAML file to write")
-    Path(parser.parse_args(argv).path).write_text(parameter_file())
+    what = "the arm_planner parameter file from the node's declarations"
+    write_generated("nehmo_ros.param_file", what, parameter_file, argv)
 
 
 if __name__ == "__main__":

@@ -8,12 +8,13 @@ A test checks that the page is current, so the reference never drifts from the c
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from dataclasses import fields
 from pathlib import Path
 
 from nehmo_core.planning.settings.planner import PAPER_OPT, PRESETS, PlannerSettings
 
-__all__ = ["markdown"]
+__all__ = ["markdown", "write_generated"]
 
 INTRO = """\
 # Planner settings
@@ -63,13 +64,19 @@ def markdown() -> str:
     return "".join(out)
 
 
+def write_generated(
+    module: str, what: str, render: Callable[[], str], argv: list[str] | None = None
+) -> None:
+    """The command line of a module that writes a generated file: ``python -m MODULE PATH``."""
+    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=f"write {what}")
+    parser.add_argument("path", type=Path, help="the file to write")
+    Path(parser.parse_args(argv).path).write_text(render())
+
+
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog="python -m nehmo_core.planning.settings.reference",
-        description="write the planner settings reference (docs/settings.md)",
+    write_generated(
+        __spec__.name, "the planner settings reference (docs/settings.md)", markdown, argv
     )
-    parser.add_argument("path", type=Path, help="the Markdown file to write")
-    Path(parser.parse_args(argv).path).write_text(markdown())
 
 
 if __name__ == "__main__":

@@ -42,20 +42,8 @@ class Rule:
         """The rule in words, e.g. ``must lie in (0, 1]``."""
         if self.choices:
             return f"one of {' | '.join(self.choices)}"
-        lo = (
-            f"[{self.ge:g}"
-            if self.ge is not None
-            else f"({self.gt:g}"
-            if self.gt is not None
-            else ""
-        )
-        hi = (
-            f"{self.le:g}]"
-            if self.le is not None
-            else f"{self.lt:g})"
-            if self.lt is not None
-            else ""
-        )
+        lo = _bound("[", self.ge, "(", self.gt)
+        hi = _bound("]", self.le, ")", self.lt, after=True)
         if lo and hi:
             return f"must lie in {lo}, {hi}"
         if lo:
@@ -63,6 +51,16 @@ class Rule:
         if hi:
             return f"must be {'<=' if self.le is not None else '<'} {hi[:-1]}"
         return ""
+
+
+def _bound(
+    closed: str, inclusive: float | None, open_: str, exclusive: float | None, after: bool = False
+) -> str:
+    """``[0`` / ``(0`` (a low end) or ``1]`` / ``1)`` (a high end, ``after``); '' for none."""
+    for bracket, value in ((closed, inclusive), (open_, exclusive)):
+        if value is not None:
+            return f"{value:g}{bracket}" if after else f"{bracket}{value:g}"
+    return ""
 
 
 def setting(default: Any, doc: str, unit: str = "", **rule: Any) -> Any:
