@@ -9,10 +9,11 @@ default), and Ha et al.'s shared tasks (46 without obstacles). Variants: the ful
 planner and one per stage with that stage off (``VARIANTS``). Two workers, the real 40 ms solve
 deadline, as the tables run.
 
-The verdict per stage: it earns its place when, in some row, switching it off lowers SR by more
-than two standard errors of the difference (pooled over the seeds), or adds a collision (between
-arms or of an arm with itself) where the full planner has fewer. A stage that does neither in any
-row is a candidate for removal.
+The verdict per stage: it earns its place when, in some row, switching it off lowers SR or
+raises the rate of collisions (between arms, or of an arm with itself) by more than two standard
+errors of the difference (pooled over the seeds), or brings a collision into a row where the full
+planner has none (the bar for cooperating arms is zero). A stage that does none of these in any
+row changes nothing beyond noise: a candidate for removal.
 """
 
 from __future__ import annotations
@@ -55,8 +56,10 @@ def _dirs(out: Path, row: str, seeds: list[int]) -> list[tuple[int | None, Path]
     return [(s, out / f"{row}_s{s}") for s in seeds]
 
 
-def run(out: Path, seeds: list[int], episodes: int, tasks: Path) -> None:
+def run(out: Path, seeds: list[int], episodes: int, tasks: Path, rows: list[str]) -> None:
     for row, (setup, planners) in ROWS.items():
+        if row not in rows:
+            continue
         for variant, (settings, _) in VARIANTS.items():
             for seed, base in _dirs(out, row, seeds):
                 dest = base / variant
@@ -110,6 +113,13 @@ def _sr(c: dict[str, int]) -> float:
     return 100.0 * c["successes"] / max(c["episodes"], 1)
 
 
+def _beyond_noise(high: dict[str, int], low: dict[str, int], key: str) -> bool:
+    """``high[key]``'s rate above ``low[key]``'s by more than two standard errors."""
+    p1, p2 = high[key] / high["episodes"], low[key] / low["episodes"]
+    se = math.sqrt(p1 * (1 - p1) / high["episodes"] + p2 * (1 - p2) / low["episodes"])
+    return p1 - p2 > 2 * se and p1 > p2
+
+
 def verdicts(table: dict[str, dict[str, dict[str, Any]]]) -> dict[str, list[str]]:
     """variant → the rows where switching its stage off mattered (and how)."""
     found: dict[str, list[str]] = {v: [] for v in VARIANTS if v != "full"}
@@ -121,17 +131,25 @@ def verdicts(table: dict[str, dict[str, dict[str, Any]]]) -> dict[str, list[str]
             if variant == "full":
                 continue
             off = data["pooled"]
-            p1, p2 = full["successes"] / full["episodes"], off["successes"] / off["episodes"]
-            se = math.sqrt(p1 * (1 - p1) / full["episodes"] + p2 * (1 - p2) / off["episodes"])
-            if p1 - p2 > 2 * se and p1 > p2:
+            if _beyond_noise(full, off, "successes"):
                 found[variant].append(f"{row}: SR {_sr(full):.0f} → {_sr(off):.0f} %")
             for kind, label in (
                 ("inter_arm", "collisions between arms"),
                 ("self", "self-collisions"),
             ):
-                if off[kind] > full[kind]:
-                    found[variant].append(f"{row}: {label} {full[kind]} → {off[kind]}")
+                if _beyond_noise(off, full, kind) or full[kind] == 0 < off[kind]:
+                    n = f"{full['episodes']} and {off['episodes']} episodes"
+                    found[variant].append(f"{row}: {label} {full[kind]} → {off[kind]} ({n})")
     return found
+
+
+def _seeds_used(table: dict[str, dict[str, dict[str, Any]]]) -> str:
+    used = []
+    for row, variants in table.items():
+        seeds = sorted({s for v in variants.values() for s in v["seeds"] if s != "tasks"})
+        if seeds:
+            used.append(f"{row} {', '.join(seeds)}")
+    return "; ".join(used)
 
 
 def _cell(c: dict[str, int]) -> str:
@@ -145,7 +163,7 @@ def markdown(table: dict[str, dict[str, dict[str, Any]]], seeds: list[int], note
         "# Ablation: each stage beyond the paper switched off alone\n\n",
         "Written by `./run python bench/ablation.py report` from the runs of "
         "`bench/ablation.py run` (how they are run and judged: the script's docstring). "
-        f"Scenario seeds {', '.join(map(str, seeds))} (fresh: never used to tune anything), "
+        f"Fresh scenario seeds (never used to tune anything): {_seeds_used(table)}; "
         "and Ha et al.'s 46 shared tasks without obstacles.",
         f" {note}\n\n" if note else "\n\n",
         "Each cell: SR % / collisions between arms (episodes) / self-collisions (episodes) / "
@@ -176,10 +194,11 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[49, 50])
     parser.add_argument("--episodes", type=int, default=50, help="episodes per seed and row")
     parser.add_argument("--tasks", type=Path, default=HA_TASKS, help="Ha et al.'s task files")
+    parser.add_argument("--rows", nargs="+", choices=list(ROWS), default=list(ROWS))
     parser.add_argument("--note", default="", help="a sentence added to the page's introduction")
     args = parser.parse_args()
     if args.action == "run":
-        run(args.out, args.seeds, args.episodes, args.tasks)
+        run(args.out, args.seeds, args.episodes, args.tasks, args.rows)
         return
     table = collect(args.out, args.seeds)
     RESULTS.write_text(json.dumps({"seeds": args.seeds, "rows": table}, indent=1) + "\n")
