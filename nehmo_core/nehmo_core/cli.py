@@ -27,6 +27,12 @@ _COMMANDS: dict[str, tuple[str, str, str, str]] = {
         "run",
         "evaluate planners on the paper's setups (metrics from the logs)",
     ),
+    "robot": (
+        "nehmo_core.robots.robot_cli",
+        "add_arguments",
+        "run",
+        "check a URDF as an arm NeHMO can plan for",
+    ),
     "tasks": (
         "nehmo_core.eval.task_generator_cli",
         "add_arguments",
