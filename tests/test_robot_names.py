@@ -1,8 +1,9 @@
 """Robot facts live with the robots: code outside ``nehmo_core/robots/`` names no robot.
 
-Whatever is known about a robot by name (keypoints, CHOMP radius, sampling ranges) or about a
-pair of robots (which learned distances and value functions exist) is in the robot registry,
-:mod:`nehmo_core.robots.registry`, and reaches other code through ``robot.facts`` or the
+Whatever is known about a robot by name (keypoints, CHOMP radius, sampling ranges) is in its
+description file (``robots/data/<name>/robot.yaml``), and what is known about a pair of robots
+(which learned distances and value functions exist) is in the robot registry,
+:mod:`nehmo_core.robots.registry`; both reach other code through ``robot.facts`` or the
 registry's tables. So no string constant of the planner, geometry, simulation, evaluation, HJR,
 verification or ROS code may equal a robot name or a shipped pair / model name. Docstrings (and
 comments) are exempt, and so are data files and tests. A constant that is the name of a shipped
@@ -20,7 +21,8 @@ import pytest
 from nehmo_core.geometry.distance_model import MODELS_DIR
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.robots import ROBOT_NAMES, cell_names, load_cell, load_robot
-from nehmo_core.robots.registry import ARM_PAIRS, PAIR_NAMES, ROBOTS, SWAPPED_PAIRS, robot_facts
+from nehmo_core.robots.descriptions import robot_description
+from nehmo_core.robots.registry import ARM_PAIRS, PAIR_NAMES, SWAPPED_PAIRS, robot_facts
 
 ROOT = Path(__file__).resolve().parents[1]
 CORE = ROOT / "nehmo_core" / "nehmo_core"
@@ -82,7 +84,7 @@ def test_the_check_finds_a_literal_and_skips_docstrings(tmp_path: Path) -> None:
 @pytest.mark.parametrize("name", ROBOT_NAMES)
 def test_a_loaded_robot_carries_its_registry_facts(name: str) -> None:
     robot = load_robot(name)
-    assert robot.facts == robot_facts(name) == ROBOTS[name].facts
+    assert robot.facts == robot_facts(name) == robot_description(name).facts
     links = set(ArmKinematics(robot).link_names)
     assert set(robot.facts.keypoints) <= links
     assert {x for a, b, _ in robot.facts.keypoint_segments for x in (a, b)} <= links

@@ -47,7 +47,8 @@ from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.eval.ha_tasks import TOOL_OFFSET
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.robots.loader import ROBOT_NAMES, load_robot
+from nehmo_core.robots.descriptions import robot_names
+from nehmo_core.robots.loader import load_robot
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
 from nehmo_core.robots.registry import HA_BENCHMARK_ROBOT
 from nehmo_core.sim.scenarios import goal_error, sample_configuration
@@ -87,9 +88,9 @@ class TaskSpec:
     def __post_init__(self) -> None:
         if self.arms < 1:
             raise InvalidValueError("arms", "must be >= 1", self.arms)
-        if self.robot not in ROBOT_NAMES:
+        if self.robot not in robot_names():
             raise InvalidValueError(
-                "robot", f"must be a registered robot {list(ROBOT_NAMES)}", self.robot
+                "robot", f"must be a registered robot {list(robot_names())}", self.robot
             )
         for name in ("clearance", "min_goal_distance"):
             value = getattr(self, name)

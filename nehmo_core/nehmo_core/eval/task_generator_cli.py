@@ -18,7 +18,7 @@ from pathlib import Path
 
 from nehmo_core.errors import InvalidValueError, as_options
 from nehmo_core.eval.task_generator import TaskSpec, task_rng, write_tasks
-from nehmo_core.robots.loader import ROBOT_NAMES
+from nehmo_core.robots.descriptions import robot_names
 from nehmo_core.robots.registry import HA_BENCHMARK_ROBOT
 
 __all__ = ["add_arguments", "run"]
@@ -48,7 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--robot",
         default=HA_BENCHMARK_ROBOT,
-        help=f"a registered robot, one of {', '.join(ROBOT_NAMES)} (default: the benchmark's, "
+        help=f"a registered robot, one of {', '.join(robot_names())} (default: the benchmark's, "
         f"{HA_BENCHMARK_ROBOT}; only its tasks run under `nehmo evaluate --tasks`)",
     )
     g.add_argument(

@@ -1,6 +1,7 @@
 """Robot models (UR5, Kinova Gen3 6-DoF, planar 2-link), their registry and cell layouts."""
 
-from nehmo_core.robots.loader import ROBOT_NAMES, cell_names, load_cell, load_robot
+from nehmo_core.robots.descriptions import robot_names
+from nehmo_core.robots.loader import cell_names, load_cell, load_robot
 from nehmo_core.robots.model import (
     ArmSpec,
     Cell,
@@ -10,6 +11,7 @@ from nehmo_core.robots.model import (
     RobotModel,
     wrap_angle,
 )
+from nehmo_core.robots.registry import ROBOT_NAMES
 
 __all__ = [
     "ROBOT_NAMES",
@@ -22,5 +24,6 @@ __all__ = [
     "cell_names",
     "load_cell",
     "load_robot",
+    "robot_names",
     "wrap_angle",
 ]

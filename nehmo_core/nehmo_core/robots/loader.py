@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import importlib.metadata
 import math
 import os
 import re
@@ -23,6 +22,7 @@ from typing import Any
 import yaml
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError, UnknownNameError
+from nehmo_core.robots.descriptions import robot_description
 from nehmo_core.robots.model import (
     ArmSpec,
     Cell,
@@ -32,7 +32,8 @@ from nehmo_core.robots.model import (
     RobotModel,
     as_pose,
 )
-from nehmo_core.robots.registry import ROBOT_NAMES, ROBOTS, robot_facts
+from nehmo_core.robots.registry import robot_facts
+from nehmo_core.robots.urdf_check import mesh_path, package_roots
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 CELLS_DIR = Path(__file__).resolve().parent / "cells"
@@ -48,20 +49,6 @@ def cell_names() -> tuple[str, ...]:
     return tuple(sorted(p.stem for p in CELLS_DIR.glob("*.yaml")))
 
 
-def _example_robot_data_share() -> Path:
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError as exc:
-        raise ModelFileError(
-            "the UR5 model needs the 'example-robot-data' package; install the pinned "
-            "requirements (./run does this)"
-        ) from exc
-    for f in dist.files or []:
-        if str(f).endswith("ur_description/urdf/ur5_robot.urdf"):
-            return Path(str(dist.locate_file(f))).parents[3]
-    raise ModelFileError("example-robot-data is installed but ships no ur5_robot.urdf")
-
-
 def _atomic_write(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp") as fh:
@@ -69,18 +56,27 @@ def _atomic_write(path: Path, text: str) -> None:
     os.replace(fh.name, path)
 
 
-def _ur5_urdf() -> tuple[Path, Path]:
-    """Return (cached URDF with absolute mesh paths, SRDF) for the UR5."""
-    share = _example_robot_data_share()  # .../share/example-robot-data
-    src = share / "robots" / "ur_description" / "urdf" / "ur5_robot.urdf"
-    srdf = share / "robots" / "ur_description" / "srdf" / "ur5.srdf"
-    text = src.read_text()
-    text = text.replace("package://example-robot-data/", f"{share.as_posix()}/")
+def _resolved_urdf(urdf: Path) -> Path:
+    """``urdf`` itself, or a cached copy with its ``package://`` URIs made absolute (PyBullet
+    and the mesh readers need files): each resolves against the folders above the URDF and
+    ``example-robot-data`` (:func:`~nehmo_core.robots.urdf_check.package_roots`)."""
+    text = urdf.read_text()
+    if "package://" not in text:
+        return urdf
+    roots = package_roots(urdf)
+
+    def absolute(match: re.Match[str]) -> str:
+        found = mesh_path(urdf, match.group(0), roots)
+        if found is None:
+            raise ModelFileError(f"{urdf}: unresolved mesh URI {match.group(0)!r}")
+        return found.as_posix()
+
+    text = re.sub(r"package://[^\"'<>\s]+", absolute, text)
     digest = hashlib.sha256(text.encode()).hexdigest()[:12]
-    out = cache_dir() / "robots" / f"ur5_{digest}.urdf"
+    out = cache_dir() / "robots" / f"{urdf.stem.removesuffix('_robot')}_{digest}.urdf"
     if not out.exists():
         _atomic_write(out, text)
-    return out, srdf
+    return out
 
 
 def _parse_srdf(path: Path | None) -> frozenset[frozenset[str]]:
@@ -167,22 +163,11 @@ def robot_from_urdf(
 
 @functools.cache
 def load_robot(name: str) -> RobotModel:
-    """Load a robot model by name (``ur5``, ``kinova_gen3_6dof``, ``planar_2link``)."""
-    if name not in ROBOTS:
-        raise UnknownNameError("robot", name, ROBOT_NAMES)
-    entry = ROBOTS[name]
-    if entry.source == "example-robot-data":
-        urdf, srdf = _ur5_urdf()
-        return robot_from_urdf(name, urdf, entry.tip, srdf, entry.facts)
-    folder = DATA_DIR / name
-    srdf_path = folder / f"{name}.srdf"
-    return robot_from_urdf(
-        name,
-        folder / f"{name}.urdf",
-        entry.tip,
-        srdf_path if srdf_path.exists() else None,
-        entry.facts,
-    )
+    """Load a robot model by name: a shipped robot (``ur5``, ``kinova_gen3_6dof``,
+    ``planar_2link``) or one described in a folder of ``NEHMO_ROBOTS``
+    (:mod:`nehmo_core.robots.descriptions`)."""
+    d = robot_description(name)
+    return robot_from_urdf(name, _resolved_urdf(d.urdf), d.tip, d.srdf, d.facts)
 
 
 def _require(mapping: dict[str, Any], key: str, where: str) -> Any:

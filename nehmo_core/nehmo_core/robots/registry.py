@@ -3,9 +3,10 @@ of robots, by name. Code outside :mod:`nehmo_core.robots` reads robot facts from
 (``robot.facts``, attached by :func:`~nehmo_core.robots.loader.load_robot`) and pair facts from
 here; it names no robot itself (``tests/test_robot_names.py`` checks that).
 
-* :data:`ROBOTS`: per robot, where its URDF comes from, its tip link and its
-  :class:`~nehmo_core.robots.model.RobotFacts` (learned-distance keypoints, CHOMP's sphere
-  radius, the evaluation protocol's joint sampling ranges).
+* a robot is its description file (:mod:`nehmo_core.robots.descriptions`): where its URDF comes
+  from, its tip link and its :class:`~nehmo_core.robots.model.RobotFacts` (learned-distance
+  keypoints, CHOMP's sphere radius, the evaluation protocol's joint sampling ranges);
+  :func:`robot_facts` reads them.
 * :data:`ARM_PAIRS`: the named arm pairs, i.e. the learned distances and HJI games, each with
   its robots (controlled robot first), its frame (arms of a shipped cell, arm 2 at any base
   distance, or another pair seen from its second arm) and which of its models ship.
@@ -14,9 +15,9 @@ here; it names no robot itself (``tests/test_robot_names.py`` checks that).
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
+from nehmo_core.robots.descriptions import DATA_DIR, robot_description, robot_names
 from nehmo_core.robots.model import RobotFacts
 
 __all__ = [
@@ -25,11 +26,9 @@ __all__ = [
     "FIXED_PAIRS",
     "HA_BENCHMARK_ROBOT",
     "PAIR_NAMES",
-    "ROBOTS",
     "ROBOT_NAMES",
     "SWAPPED_PAIRS",
     "ArmPair",
-    "RobotEntry",
     "distance_pairs",
     "pairs_by_robots",
     "robot_facts",
@@ -42,88 +41,18 @@ KINOVA = "kinova_gen3_6dof"
 PLANAR = "planar_2link"
 
 
-@dataclass(frozen=True)
-class RobotEntry:
-    """Where a robot's URDF comes from (``example-robot-data`` or ``project``: ``data/<name>/``),
-    the tip link of its chain, and its facts."""
-
-    source: str
-    tip: str
-    facts: RobotFacts = field(default_factory=RobotFacts)
-
-
-_HALF_PI = math.pi / 2
-ROBOTS: dict[str, RobotEntry] = {
-    UR5: RobotEntry(
-        "example-robot-data",
-        "ee_link",
-        RobotFacts(
-            keypoints=(
-                "base_link",
-                "shoulder_link",
-                "upper_arm_link",
-                "forearm_link",
-                "wrist_1_link",
-                "wrist_2_link",
-                "wrist_3_link",
-                "ee_link",
-            ),
-            keypoint_segments=(
-                ("upper_arm_link", "forearm_link", 3),
-                ("forearm_link", "wrist_1_link", 3),
-            ),
-            sphere_radius=0.08,
-            # The paper's ranges in this project's joint zeros: example-robot-data's UR5 differs
-            # from the authors' model by −π/2 on shoulder_lift (q₂) and wrist_1 (q₄).
-            sampling_ranges=(
-                (-5.0, -1.5),  # wrapped to (−π, π] after the draw
-                (-1.0 - _HALF_PI, 0.5 - _HALF_PI),
-                (1.0, 2.0),
-                (-0.2 - _HALF_PI, 0.8 - _HALF_PI),
-                (-2.5, -0.5),
-                (-1e-4, 0.0),
-            ),
-        ),
-    ),
-    KINOVA: RobotEntry(
-        "project",
-        "end_effector_link",
-        RobotFacts(
-            keypoints=(
-                "base_link",
-                "shoulder_link",
-                "bicep_link",
-                "forearm_link",
-                "spherical_wrist_1_link",
-                "spherical_wrist_2_link",
-                "bracelet_link",
-                "end_effector_link",
-            ),
-            keypoint_segments=(
-                ("shoulder_link", "bicep_link", 1),
-                ("bicep_link", "forearm_link", 3),
-                ("forearm_link", "spherical_wrist_1_link", 2),
-                ("spherical_wrist_1_link", "spherical_wrist_2_link", 1),
-                ("spherical_wrist_2_link", "bracelet_link", 1),
-            ),
-            sphere_radius=0.065,
-            # No sampling ranges: within the joint limits clipped to ±π, wider than the authors'
-            # box (their limited joints 2 and 4, 7-DoF numbering, in ±2 rather than ±2.41 /
-            # ±2.66); the committed scenario sets were drawn this way.
-        ),
-    ),
-    PLANAR: RobotEntry("project", "tip"),
-}
-ROBOT_NAMES: tuple[str, ...] = tuple(ROBOTS)
+ROBOT_NAMES: tuple[str, ...] = tuple(sorted(p.parent.name for p in DATA_DIR.glob("*/robot.yaml")))
+"""The shipped robots (``robots/data/<name>/robot.yaml``; more: ``NEHMO_ROBOTS``)."""
 
 HA_BENCHMARK_ROBOT = UR5
 """The robot of Ha et al.'s multi-arm benchmark (their task files hold its joint vectors)."""
 
 
 def robot_facts(name: str) -> RobotFacts:
-    """The registry's facts about robot ``name`` (none for a robot it does not know)."""
-    entry = ROBOTS.get(name)
-    return entry.facts if entry is not None else RobotFacts()
+    """The facts of robot ``name``'s description (none for a robot that has no description)."""
+    if name not in robot_names():
+        return RobotFacts()
+    return robot_description(name).facts
 
 
 SHIPPED = "shipped"

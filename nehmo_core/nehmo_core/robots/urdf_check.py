@@ -22,7 +22,7 @@ from pathlib import Path
 
 from nehmo_core.errors import ModelFileError
 
-__all__ = ["ChainJoint", "UrdfReport", "check_urdf"]
+__all__ = ["ChainJoint", "UrdfReport", "check_urdf", "mesh_path", "package_roots"]
 
 MOVABLE = ("revolute", "continuous")
 
@@ -71,7 +71,7 @@ def _fail(urdf: Path, what: str) -> ModelFileError:
     return ModelFileError(f"{urdf}: {what}")
 
 
-def _package_roots(urdf: Path) -> list[Path]:
+def package_roots(urdf: Path) -> list[Path]:
     """Folders a ``package://NAME/`` URI may be relative to: every folder above the URDF, and
     the ``example-robot-data`` share folder when that package is installed."""
     roots = list(urdf.resolve().parents)
@@ -86,7 +86,7 @@ def _package_roots(urdf: Path) -> list[Path]:
     return roots
 
 
-def _mesh_path(urdf: Path, uri: str, roots: list[Path]) -> Path | None:
+def mesh_path(urdf: Path, uri: str, roots: list[Path]) -> Path | None:
     if uri.startswith("package://"):
         rel = uri[len("package://") :]
         for root in roots:
@@ -197,11 +197,11 @@ def check_urdf(urdf: Path, tip: str | None = None) -> UrdfReport:
                 f"links {body} moved by joint {mover!r} have no <collision> geometry "
                 "(distances and collisions use the collision shapes)",
             )
-    search = _package_roots(urdf)
+    search = package_roots(urdf)
     for lk in with_collision:
         for mesh in (m for c in links[lk].findall("collision") for m in c.iter("mesh")):
             uri = mesh.attrib.get("filename", "")
-            if _mesh_path(urdf, uri, search) is None:
+            if mesh_path(urdf, uri, search) is None:
                 raise _fail(urdf, f"collision mesh of link {lk!r} not found: {uri!r}")
     ignored = tuple(sorted(set(links) - set(on_chain)))
     return UrdfReport(

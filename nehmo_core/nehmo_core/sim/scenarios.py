@@ -2,7 +2,7 @@
 
 The authors sample UR5 joints in their model's zeros; ``example-robot-data``'s UR5 differs by
 −π/2 on shoulder_lift (q₂) and wrist_1 (q₄), so those two ranges are shifted (the ranges are the
-robot's ``facts.sampling_ranges``, in the robot registry :mod:`nehmo_core.robots.registry`).
+robot's ``facts.sampling_ranges``, from its description ``robots/data/<name>/robot.yaml``).
 
 Draws follow the authors' protocol to the number, so that seed 0 reproduces the paper's scenarios:
 
