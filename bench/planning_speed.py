@@ -81,9 +81,7 @@ VARIANTS = {
     "nehmo": WATCH_OFF,
     "nehmo, Python SQP loop": WATCH_OFF.override({"solver.sqp_native": False}),
     "nehmo, tight SQP": WATCH_OFF.override({"solver.sqp_tol": 1e-7, "solver.sqp_screen": math.inf}),
-    "nehmo, no speed bounds, single fail-safe": WATCH_OFF.override(
-        {"hold.bound": 1.0, "fail_safe.kind": "single"}
-    ),
+    "nehmo, no speed bounds": WATCH_OFF.override({"hold.bound": 1.0}),
     "nehmo_paper": PlannerSettings.preset("paper"),
 }
 

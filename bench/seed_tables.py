@@ -91,7 +91,7 @@ def table(seeds: list[int]) -> str:
         "(the development seeds are 30, 31 and 32, `../options/README.md`). "
         + "".join(SEED_NOTES[s] + ". " for s in seeds if s in SEED_NOTES)
         + "100 episodes per row and seed, "
-        "`nehmo` with its defaults (maximin fail-safe, announced speed bounds, certified "
+        "`nehmo` with its defaults (announced speed bounds, certified "
         "margins: `../options/certified_margins.md`; the same rows with ε = 0.05 m everywhere: "
         "`fixed_eps/`), the baselines as in `../table_II.md`. Cells: SR / CR between arms / "
         "self-collision / stuck [%]. A target is met when every seed meets it.",

@@ -9,10 +9,10 @@ starts, Hessian estimates, stall counters, announcements, the silent-path watch)
 command is compared from exactly the inputs it was planned from. Solve deadlines are lifted, so
 no command depends on the machine's speed.
 
-The episodes were chosen to exercise every mechanism: the stall escape, the maximin fail-safe,
-announced speed bounds and holds, the exact guard, the silent-path watch (a reckless Kinova), and
-the paper's Opt (``nehmo_paper``). Record anew (only when behaviour is meant to change, and say
-so in the commit) with::
+The episodes were chosen to exercise every mechanism: the stall escape, the fail-safe between
+several peers, announced speed bounds and holds, the exact guard, the silent-path watch (a
+reckless Kinova), and the paper's Opt (``nehmo_paper``). Record anew (only when behaviour is
+meant to change, and say so in the commit) with::
 
     ./run python tests/test_reference_ticks.py --record [CASE ...]
 """

@@ -30,7 +30,7 @@ that flags joint states moving faster than ``opt.d_max``; ``.inf``: off), ``allo
 (accept peers in reach that no pair model covers: they are then not constrained; default false:
 an error), ``fault_injection`` (tests only, default '' = off: :mod:`nehmo_ros.fault_injection`),
 and every planner setting by its dotted name (``opt.t_plan``, ``hold.bound``,
-``fail_safe.slack``, ...: :func:`planner_params`, ``docs/settings.md``); ``opt.deadline`` [s]
+``escape.stall_ticks``, ...: :func:`planner_params`, ``docs/settings.md``); ``opt.deadline`` [s]
 is 0 by default: 75 % of the period, and ``opt.tick`` comes from ``rate``.
 
 Faults are reported, never fatal: rejected or jumping joint states, stale peers, solver
@@ -67,7 +67,7 @@ from nehmo_core.logs.topics import (
     speed_bound_topic,
     status_topic,
 )
-from nehmo_core.planning.settings import RENAMED, PlannerSettings
+from nehmo_core.planning.settings import REMOVED, RENAMED, PlannerSettings
 from nehmo_ros.control import ArmController, ControlSettings, Decision
 from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
 from nehmo_ros.node_support import (
@@ -114,7 +114,7 @@ DEADLINE = Param(0.0, "[s] solve budget within a period; 0: 75 % of the period",
 
 
 def planner_params() -> dict[str, Param]:
-    """One node parameter per planner setting, named ``group.field`` (``fail_safe.slack``),
+    """One node parameter per planner setting, named ``group.field`` (``hold.bound``),
     with the description, unit and range of its settings group."""
     defaults = PlannerSettings().flat()
     out: dict[str, Param] = {}
@@ -173,7 +173,16 @@ class ArmPlannerNode(Node):
 
     def __init__(self) -> None:
         super().__init__("arm_planner")
-        refuse_renamed(self, RENAMED)
+        refuse_renamed(
+            self,
+            {
+                **{
+                    old: f"is now `{new}` (settings are named group.field)"
+                    for old, new in RENAMED.items()
+                },
+                **{old: f"no longer exists: {why}" for old, why in REMOVED.items()},
+            },
+        )
         p = declare_parameters(self, PARAMS)
         self.cell = load_cell_parameter(p["cell"])
         arm_id = require_text("arm_id", p["arm_id"], f"one of the cell's arms {self.cell.arm_ids}")

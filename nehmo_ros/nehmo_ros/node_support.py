@@ -117,17 +117,14 @@ def _override(node: Node, name: str, fallback: Any) -> Any:
     return overrides[name].value if name in overrides else fallback
 
 
-def refuse_renamed(node: Node, renamed: Mapping[str, str]) -> None:
-    """An error for a parameter given under a name that was replaced (``hold_bound`` is now
-    ``hold.bound``): rclpy would ignore it silently, as it ignores any undeclared name."""
-    given = sorted(set(getattr(node, "_parameter_overrides", {})) & set(renamed))
+def refuse_renamed(node: Node, rules: Mapping[str, str]) -> None:
+    """An error for a parameter given under a name that was replaced or removed (``hold_bound``
+    is now ``hold.bound``): rclpy would ignore it silently, as it ignores any undeclared name.
+    ``rules`` maps each such name to what is said about it."""
+    given = sorted(set(getattr(node, "_parameter_overrides", {})) & set(rules))
     if given:
         old = given[0]
-        raise InvalidValueError(
-            old,
-            f"is now `{renamed[old]}` (settings are named group.field)",
-            _override(node, old, None),
-        )
+        raise InvalidValueError(old, rules[old], _override(node, old, None))
 
 
 def require_text(name: str, value: str, hint: str) -> str:

@@ -5,7 +5,7 @@
     ./run python -m nehmo_ros.param_file nehmo_ros/config/arm_planner.yaml
 
 Planner settings nest by group, so ``fail_safe: {slack: 0.005}`` sets the parameter
-``fail_safe.slack`` (ROS 2 joins nested keys of a parameter file with dots).
+``hold.bound`` (ROS 2 joins nested keys of a parameter file with dots).
 """
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ def test_paper_preset_turns_every_stage_off_and_nothing_else() -> None:
     assert changed == set(PAPER_OPT)
     assert not paper.escape.enabled and not paper.self_clearance.enabled
     assert paper.hold.bound == 1.0 and paper.exact_guard.gap == 0.0
-    assert paper.silent_watch.lookahead == 0.0 and paper.fail_safe.kind == "single"
+    assert paper.silent_watch.lookahead == 0.0 and paper.fail_safe == default.fail_safe
     assert paper.opt == default.opt and paper.solver == default.solver
 
 
@@ -67,14 +67,14 @@ def test_command_line_assignments_are_typed_by_the_setting() -> None:
             "opt.t_plan=0.08",
             "escape.enabled=false",
             "escape.stall_ticks=20",
-            "fail_safe.kind=single",
+            "solver.name=ipopt",
         ]
     )
     assert got == {
         "opt.t_plan": 0.08,
         "escape.enabled": False,
         "escape.stall_ticks": 20,
-        "fail_safe.kind": "single",
+        "solver.name": "ipopt",
     }
     assert parse_assignments(["exact_guard.scales=1,0.5"]) == {"exact_guard.scales": (1.0, 0.5)}
     with pytest.raises(InvalidValueError, match=r"escape\.enabled must be true or false"):
@@ -97,3 +97,8 @@ def test_the_settings_page_is_current() -> None:
         "docs/settings.md drifted: ./run python -m nehmo_core.planning.settings.reference "
         "docs/settings.md"
     )
+
+
+def test_a_removed_setting_says_why() -> None:
+    with pytest.raises(UnknownNameError, match=r"'fail_safe\.kind' no longer exists: the maximin"):
+        PlannerSettings().override({"fail_safe.kind": "maximin"})

@@ -1,6 +1,6 @@
 """The arm_planner's parameters have one source: the settings dataclasses.
 
-Every planner setting is a node parameter under its dotted name (``fail_safe.slack``) with the
+Every planner setting is a node parameter under its dotted name (``hold.bound``) with the
 default, description and range of its group; the shipped parameter file
 ``nehmo_ros/config/arm_planner.yaml`` is generated from the declarations and must not drift.
 """

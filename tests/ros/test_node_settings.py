@@ -17,17 +17,17 @@ def test_planner_settings_given_as_node_parameters_reach_the_planner() -> None:
         "hold.release:=0.25",
         "hold.bound:=0.3",
         "escape.enabled:=false",
-        "fail_safe.kind:=single",
+        "fail_safe.deadband:=0.2",
     ]
     with in_process("arm_planner", [*BASE, *given]) as nodes:
         node = ArmPlannerNode()
         nodes.add(node)
         s = node.controller.planner.settings
-        assert (s.hold.release, s.hold.bound, s.escape.enabled, s.fail_safe.kind) == (
+        assert (s.hold.release, s.hold.bound, s.escape.enabled, s.fail_safe.deadband) == (
             0.25,
             0.3,
             False,
-            "single",
+            0.2,
         )
         assert isinstance(s.hold.release, float) and isinstance(s.escape.enabled, bool)
 

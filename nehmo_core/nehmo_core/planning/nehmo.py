@@ -80,9 +80,7 @@ class NehmoPlanner:
         self._row_providers: tuple[RowProvider, ...] = staged.rows
         self._objectives: tuple[Objective, ...] = staged.objectives
         self._filters: tuple[CommandFilter, ...] = staged.filters
-        self._fallback: Fallback = staged.fallback or HjiFailSafe(
-            self.robot.dof, s.fail_safe.deadband
-        )
+        self._fallback: Fallback = HjiFailSafe(self.robot.dof, s.fail_safe.deadband)
         self.reset()
 
     def stage(self, name: str) -> Stage:
@@ -187,8 +185,8 @@ class NehmoPlanner:
         peer_bounds: Mapping[str, float] | None = None,
     ) -> np.ndarray:
         """The fail-safe command (dof,) [rad/s] at this state: ``ū·sign(∂V/∂q¹)`` of the most
-        critical constrained peer (or the fallback stage's command, e.g. maximin), kept within
-        the row providers' rows; zero (hold) when no peer is constrained.
+        critical constrained peer, kept
+        within the row providers' rows; zero (hold) when no peer is constrained.
 
         Cheap (one value-and-gradient evaluation); a ROS node computes it ahead of each solve
         so that a solve that overruns its tick still has a safe command to fall back on (a solve

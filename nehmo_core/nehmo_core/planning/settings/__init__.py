@@ -4,7 +4,6 @@ one group per stage beyond the paper (``hold``, ``exact_guard``, ``silent_watch`
 
 from nehmo_core.planning.settings.groups import (
     BACKENDS,
-    FAIL_SAFES,
     SOLVERS,
     FailSafeSettings,
     MarginSettings,
@@ -14,6 +13,7 @@ from nehmo_core.planning.settings.groups import (
 from nehmo_core.planning.settings.planner import (
     PAPER_OPT,
     PRESETS,
+    REMOVED,
     RENAMED,
     PlannerSettings,
     parse_assignments,
@@ -29,9 +29,9 @@ from nehmo_core.planning.settings.stage_groups import (
 
 __all__ = [
     "BACKENDS",
-    "FAIL_SAFES",
     "PAPER_OPT",
     "PRESETS",
+    "REMOVED",
     "RENAMED",
     "SOLVERS",
     "EscapeSettings",

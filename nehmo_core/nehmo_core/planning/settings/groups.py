@@ -18,7 +18,6 @@ __all__ = ["FailSafeSettings", "MarginSettings", "OptSettings", "SolverSettings"
 SOLVERS = ("sqp", "ipopt")
 """``sqp``: the exact active-set SQP of :mod:`nehmo_core.planning.solvers.sqp` (fast);
 ``ipopt``: IPOPT through CasADi, the authors' setting (the reference)."""
-FAIL_SAFES = ("single", "maximin")
 BACKENDS = ("auto", "compiled", "vm")
 
 
@@ -112,31 +111,14 @@ class SolverSettings:
 
 @dataclass(frozen=True)
 class FailSafeSettings:
-    """The command when Opt has no answer in time (``planning/stages/fail_safe.py``)."""
+    """The command when Opt has no answer in time: the paper's ``ū·sign(∂V/∂q¹)`` of the most
+    critical pair (``planning/opt/fail_safe.py``)."""
 
-    # "single": the paper's ū·sign(∂V/∂q¹) of the most critical peer; "maximin": the command
-    # that maximizes the smallest worst-case V rate over every peer within band [m] of the
-    # smallest V
-    kind: str = setting(
-        "maximin",
-        "single (the paper's, against the most critical peer) | maximin (against all)",
-        choices=FAIL_SAFES,
-    )
     deadband: float = setting(
         0.0,
         "joints whose |∂V/∂q_j| is below this share of the largest stay still (0: the paper's)",
         ge=0,
         lt=1,
-    )
-    band: float = setting(0.05, "maximin: peers within this of the smallest V count", "m", ge=0)
-    # lexicographic maximin: the worst pair's predicted V may drop up to slack [m] below its best
-    # to raise the next pairs' (0: plain maximin)
-    slack: float = setting(
-        0.005, "maximin: how far the worst pair may drop to raise the next", "m", ge=0, le=1
-    )
-    # 0: it never trades one peer for another; 100, above any rate: no limit
-    harm: float = setting(
-        0.0, "maximin: fastest the arm's own motion may lower a critical V", "m/s", ge=0, le=100
     )
 
     def __post_init__(self) -> None:

@@ -14,8 +14,6 @@ stage (settings group)   kind                what it changes; what it keeps
 (:mod:`.stall_escape`)
 ``exact_guard``          command filter      shortens a step toward a holding peer's real
                                              geometry; never lengthens one
-``fail_safe``            fallback            maximin over every critical peer instead of the
-                                             paper's single most critical one
 =======================  ==================  ===================================================
 
 :func:`build_stages` makes the stages a planner's settings switch on.
@@ -29,14 +27,12 @@ from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import (
     Announcer,
     CommandFilter,
-    Fallback,
     Host,
     Objective,
     RowProvider,
     Stage,
 )
 from nehmo_core.planning.stages.exact_guard import ExactGuard
-from nehmo_core.planning.stages.fail_safe import MaximinFallback
 from nehmo_core.planning.stages.self_clearance import SelfClearance
 from nehmo_core.planning.stages.silent_peers import SilentPeers
 from nehmo_core.planning.stages.speed_bounds import HoldAnnouncer
@@ -53,11 +49,10 @@ class Staged:
     rows: tuple[RowProvider, ...]
     objectives: tuple[Objective, ...]
     filters: tuple[CommandFilter, ...]
-    fallback: Fallback | None
 
     @property
     def all(self) -> tuple[Stage, ...]:
-        """Every stage but the fallback."""
+        """Every stage."""
         head: tuple[Stage, ...] = () if self.announcer is None else (self.announcer,)
         return (*head, *self.rows, *self.objectives, *self.filters)
 
@@ -78,5 +73,4 @@ def build_stages(host: Host) -> Staged:
         rows=rows,
         objectives=tuple(objectives),
         filters=(ExactGuard(host),) if s.exact_guard.gap > 0.0 else (),
-        fallback=MaximinFallback(host) if s.fail_safe.kind == "maximin" else None,
     )
