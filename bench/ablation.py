@@ -113,6 +113,10 @@ def collect(out: Path, seeds: list[int]) -> dict[str, dict[str, dict[str, Any]]]
     return table
 
 
+def _pool(per_seed: dict[str, dict[str, int]], seeds: list[str]) -> dict[str, int]:
+    return {k: sum(per_seed[s][k] for s in seeds) for k in next(iter(per_seed.values()))}
+
+
 def _sr(c: dict[str, int]) -> float:
     return 100.0 * c["successes"] / max(c["episodes"], 1)
 
@@ -130,11 +134,13 @@ def verdicts(table: dict[str, dict[str, dict[str, Any]]]) -> dict[str, list[str]
     for row, variants in table.items():
         if "full" not in variants:
             continue
-        full = variants["full"]["pooled"]
         for variant, data in variants.items():
             if variant == "full":
                 continue
-            off = data["pooled"]
+            # on the seeds both ran (a contested stage may have more than the rest)
+            both = sorted(set(data["seeds"]) & set(variants["full"]["seeds"]))
+            full = _pool(variants["full"]["seeds"], both)
+            off = _pool(data["seeds"], both)
             if _beyond_noise(full, off, "successes"):
                 found[variant].append(f"{row}: SR {_sr(full):.0f} → {_sr(off):.0f} %")
             for kind, label in (
@@ -175,12 +181,36 @@ def markdown(table: dict[str, dict[str, dict[str, Any]]], seeds: list[int], note
         "[`bench/results/ablation.json`](../bench/results/ablation.json).\n\n",
     ]
     rows = [r for r in ROWS if r in table]
-    sizes = {r: next(iter(table[r].values()))["pooled"]["episodes"] for r in rows}
+    main = [str(s) for s in seeds] + ["tasks"]
+
+    def cell(row: str, variant: str, keys: list[str]) -> dict[str, int] | None:
+        per_seed = table[row].get(variant, {}).get("seeds", {})
+        have = [k for k in keys if k in per_seed]
+        return _pool(per_seed, have) if have else None
+
+    sizes = {r: (cell(r, "full", main) or {"episodes": 0})["episodes"] for r in rows}
     out.append("| stage off | " + " | ".join(f"{r} ({sizes[r]})" for r in rows) + " |\n")
     out.append("|---" * (len(rows) + 1) + "|\n")
     for variant, (_, label) in VARIANTS.items():
-        cells = [_cell(table[r][variant]["pooled"]) if variant in table[r] else "–" for r in rows]
-        out.append(f"| {label} | " + " | ".join(cells) + " |\n")
+        cells = [cell(r, variant, main) for r in rows]
+        out.append(f"| {label} | " + " | ".join(_cell(c) if c else "–" for c in cells) + " |\n")
+    extra = [
+        (r, v, sorted(data["seeds"]))
+        for r in rows
+        for v, data in table[r].items()
+        if set(data["seeds"]) - set(main)
+    ]
+    if extra:
+        out.append(
+            "\nMore seeds for the stages whose verdict the first two left open, run for the full "
+            "planner and that stage off (pooled over every seed each ran):\n\n"
+            "| row | planner | seeds | SR / between arms / self / stuck |\n|---|---|---|---|\n"
+        )
+        for r, v, keys in extra:
+            c = cell(r, v, keys)
+            out.append(
+                f"| {r} | {VARIANTS[v][1]} | {', '.join(keys)} | {_cell(c) if c else '–'} |\n"
+            )
     out.append("\n## Verdicts\n\n")
     for variant, reasons in verdicts(table).items():
         label = VARIANTS[variant][1]
@@ -196,6 +226,9 @@ def main() -> None:
     parser.add_argument("action", choices=("run", "report"))
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "ablation")
     parser.add_argument("--seeds", type=int, nargs="+", default=[49, 50])
+    parser.add_argument(
+        "--extra-seeds", type=int, nargs="*", default=[], help="seeds run for some variants only"
+    )
     parser.add_argument("--episodes", type=int, default=50, help="episodes per seed and row")
     parser.add_argument("--tasks", type=Path, default=HA_TASKS, help="Ha et al.'s task files")
     parser.add_argument("--rows", nargs="+", choices=list(ROWS), default=list(ROWS))
@@ -204,7 +237,7 @@ def main() -> None:
     if args.action == "run":
         run(args.out, args.seeds, args.episodes, args.tasks, args.rows)
         return
-    table = collect(args.out, args.seeds)
+    table = collect(args.out, args.seeds + args.extra_seeds)
     RESULTS.write_text(json.dumps({"seeds": args.seeds, "rows": table}, indent=1) + "\n")
     PAGE.write_text(markdown(table, args.seeds, args.note))
     print(f"wrote {PAGE} and {RESULTS}", file=sys.stderr)
