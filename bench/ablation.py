@@ -9,11 +9,15 @@ default), and Ha et al.'s shared tasks (46 without obstacles). Variants: the ful
 planner and one per stage with that stage off (``VARIANTS``). Two workers, the real 40 ms solve
 deadline, as the tables run.
 
-The verdict per stage: it earns its place when, in some row, switching it off lowers SR or
-raises the rate of collisions (between arms, or of an arm with itself) by more than two standard
-errors of the difference (pooled over the seeds), or brings a collision into a row where the full
-planner has none (the bar for cooperating arms is zero). A stage that does none of these in any
-row changes nothing beyond noise: a candidate for removal.
+The verdict per stage is paired: both planners run the same scenarios (the same tasks), so each
+episode of the full planner has a twin with the stage off. The stage earns its place when, in
+some row, the episodes that only the full planner gets right (a success; no collision) outnumber
+those that only the stage-off planner gets right by more than two standard errors (McNemar's
+test: ``(b − c) / √(b + c) > 2``), or when switching it off brings a collision into a row where
+the full planner has none (the bar for cooperating arms is zero). A stage that does none of these
+in any row changes nothing beyond noise: it is removed. (The first rule compared the pooled
+rates unpaired, which ignores that the twins share a scenario; ``unpaired`` in the JSON keeps
+what it said.)
 """
 
 from __future__ import annotations
@@ -81,6 +85,13 @@ def run(out: Path, seeds: list[int], episodes: int, tasks: Path, rows: list[str]
                 subprocess.run(args, check=False)  # an error row stays visible in the report
 
 
+def _outcomes(summary: dict[str, Any]) -> dict[str, str]:
+    """Episode (scenario index or task id) → outcome."""
+    return {
+        str(e.get("scenario", e.get("task"))): e["outcome"] for e in summary["rows"][0]["episodes"]
+    }
+
+
 def _counts(summary: dict[str, Any]) -> dict[str, int]:
     ours = summary["rows"][0]["ours"]
     return {
@@ -98,23 +109,41 @@ def collect(out: Path, seeds: list[int]) -> dict[str, dict[str, dict[str, Any]]]
     table: dict[str, dict[str, dict[str, Any]]] = {}
     for row in ROWS:
         for variant in VARIANTS:
-            per_seed = {}
+            per_seed: dict[str, dict[str, Any]] = {}
             for seed, base in _dirs(out, row, seeds):
                 path = base / variant / "summary.json"
                 if path.exists():
-                    per_seed["tasks" if seed is None else str(seed)] = _counts(
-                        json.loads(path.read_text())
-                    )
+                    summary = json.loads(path.read_text())
+                    key = "tasks" if seed is None else str(seed)
+                    per_seed[key] = {**_counts(summary), "outcomes": _outcomes(summary)}
             if per_seed:
-                pooled = {
-                    k: sum(c[k] for c in per_seed.values()) for k in next(iter(per_seed.values()))
-                }
+                pooled = _pool(per_seed, list(per_seed))
                 table.setdefault(row, {})[variant] = {"seeds": per_seed, "pooled": pooled}
     return table
 
 
-def _pool(per_seed: dict[str, dict[str, int]], seeds: list[str]) -> dict[str, int]:
-    return {k: sum(per_seed[s][k] for s in seeds) for k in next(iter(per_seed.values()))}
+def _pool(per_seed: dict[str, dict[str, Any]], seeds: list[str]) -> dict[str, int]:
+    keys = [k for k in next(iter(per_seed.values())) if k != "outcomes"]
+    return {k: sum(per_seed[s][k] for s in seeds) for k in keys}
+
+
+def paired(
+    full: dict[str, dict[str, Any]], off: dict[str, dict[str, Any]], seeds: list[str], good: str
+) -> tuple[int, int, float]:
+    """Twins where only the full planner is good, only the stage-off one is, and McNemar's z;
+    ``good``: ``success`` or ``no_collision``."""
+    b = c = 0
+    for s in seeds:
+        for episode, outcome in full[s]["outcomes"].items():
+            twin = off[s]["outcomes"].get(episode)
+            if twin is None:
+                continue
+            ok = (outcome == "success", twin == "success")
+            if good == "no_collision":
+                ok = (outcome != "collision", twin != "collision")
+            b += ok[0] and not ok[1]
+            c += ok[1] and not ok[0]
+    return b, c, (b - c) / math.sqrt(b + c) if b + c else 0.0
 
 
 def _sr(c: dict[str, int]) -> float:
@@ -128,8 +157,11 @@ def _beyond_noise(high: dict[str, int], low: dict[str, int], key: str) -> bool:
     return p1 - p2 > 2 * se and p1 > p2
 
 
-def verdicts(table: dict[str, dict[str, dict[str, Any]]]) -> dict[str, list[str]]:
-    """variant → the rows where switching its stage off mattered (and how)."""
+def verdicts(
+    table: dict[str, dict[str, dict[str, Any]]], paired_test: bool = True
+) -> dict[str, list[str]]:
+    """variant → the rows where switching its stage off mattered (and how): by the paired test,
+    or (``paired_test=False``) by the first, unpaired rule."""
     found: dict[str, list[str]] = {v: [] for v in VARIANTS if v != "full"}
     for row, variants in table.items():
         if "full" not in variants:
@@ -141,15 +173,25 @@ def verdicts(table: dict[str, dict[str, dict[str, Any]]]) -> dict[str, list[str]
             both = sorted(set(data["seeds"]) & set(variants["full"]["seeds"]))
             full = _pool(variants["full"]["seeds"], both)
             off = _pool(data["seeds"], both)
-            if _beyond_noise(full, off, "successes"):
-                found[variant].append(f"{row}: SR {_sr(full):.0f} → {_sr(off):.0f} %")
+            reasons = found[variant]
+            if paired_test:
+                for good, label in (("success", "successes"), ("no_collision", "collision-free")):
+                    b, c, z = paired(variants["full"]["seeds"], data["seeds"], both, good)
+                    if z > 2:
+                        reasons.append(
+                            f"{row}: {b} episodes {label} only with it, {c} only without "
+                            f"(z = {z:.1f}; SR {_sr(full):.0f} → {_sr(off):.0f} %)"
+                        )
+            elif _beyond_noise(full, off, "successes"):
+                reasons.append(f"{row}: SR {_sr(full):.0f} → {_sr(off):.0f} %")
             for kind, label in (
                 ("inter_arm", "collisions between arms"),
                 ("self", "self-collisions"),
             ):
-                if _beyond_noise(off, full, kind) or full[kind] == 0 < off[kind]:
+                unpaired = not paired_test and _beyond_noise(off, full, kind)
+                if unpaired or full[kind] == 0 < off[kind]:
                     n = f"{full['episodes']} and {off['episodes']} episodes"
-                    found[variant].append(f"{row}: {label} {full[kind]} → {off[kind]} ({n})")
+                    reasons.append(f"{row}: {label} {full[kind]} → {off[kind]} ({n})")
     return found
 
 
@@ -238,7 +280,14 @@ def main() -> None:
         run(args.out, args.seeds, args.episodes, args.tasks, args.rows)
         return
     table = collect(args.out, args.seeds + args.extra_seeds)
-    RESULTS.write_text(json.dumps({"seeds": args.seeds, "rows": table}, indent=1) + "\n")
+    report = {
+        "seeds": args.seeds,
+        "extra_seeds": args.extra_seeds,
+        "verdicts": verdicts(table),
+        "unpaired": verdicts(table, paired_test=False),
+        "rows": table,
+    }
+    RESULTS.write_text(json.dumps(report, indent=1) + "\n")
     PAGE.write_text(markdown(table, args.seeds, args.note))
     print(f"wrote {PAGE} and {RESULTS}", file=sys.stderr)
 
