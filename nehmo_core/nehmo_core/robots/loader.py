@@ -33,7 +33,7 @@ from nehmo_core.robots.model import (
     as_pose,
 )
 from nehmo_core.robots.registry import robot_facts
-from nehmo_core.robots.urdf_check import mesh_path, package_roots
+from nehmo_core.robots.urdf_check import check_urdf, mesh_path, package_roots
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 CELLS_DIR = Path(__file__).resolve().parent / "cells"
@@ -88,74 +88,31 @@ def _parse_srdf(path: Path | None) -> frozenset[frozenset[str]]:
     )
 
 
-def _check_meshes(urdf: Path, root: ET.Element) -> None:
-    for mesh in root.iter("mesh"):
-        fname = mesh.attrib.get("filename", "")
-        if fname.startswith("package://"):
-            raise ModelFileError(f"{urdf}: unresolved mesh URI {fname!r}")
-        path = Path(fname) if os.path.isabs(fname) else urdf.parent / fname
-        if not path.exists():
-            raise ModelFileError(f"{urdf}: mesh file not found: {path}")
-
-
-def _chain(root: ET.Element, tip: str) -> list[ET.Element]:
-    """Joints from the URDF root to ``tip``, in order."""
-    by_child = {j.find("child").attrib["link"]: j for j in root.findall("joint")}  # type: ignore[union-attr]
-    chain: list[ET.Element] = []
-    link = tip
-    while link in by_child:
-        joint = by_child[link]
-        chain.append(joint)
-        link = joint.find("parent").attrib["link"]  # type: ignore[union-attr]
-    return chain[::-1]
-
-
 def robot_from_urdf(
     name: str, urdf: Path, tip: str, srdf: Path | None = None, facts: RobotFacts | None = None
 ) -> RobotModel:
-    """Build a :class:`RobotModel` from a URDF file (serial chain root → ``tip``); its ``facts``
-    default to the registry's for ``name`` (none for a name the registry does not know)."""
-    if not urdf.exists():
-        raise ModelFileError(f"robot description not found: {urdf}")
-    try:
-        root = ET.parse(urdf).getroot()
-    except ET.ParseError as exc:
-        raise ModelFileError(f"{urdf}: not valid URDF XML ({exc})") from exc
-    _check_meshes(urdf, root)
-    chain = _chain(root, tip)
-    if not chain:
-        raise ModelFileError(f"{urdf}: no joint chain leads to link {tip!r}")
-    joints = []
-    for j in chain:
-        kind = j.attrib["type"]
-        if kind == "fixed":
-            continue
-        if kind not in ("revolute", "continuous"):
-            raise ModelFileError(f"{urdf}: joint {j.attrib['name']!r} has unsupported type {kind}")
-        lim = j.find("limit")
-        attrs: dict[str, Any] = lim.attrib if lim is not None else {}
-        vel = float(attrs.get("velocity", math.inf))
-        if kind == "continuous":
-            lower, upper, cont = -math.inf, math.inf, True
-        else:
-            lower, upper = float(attrs["lower"]), float(attrs["upper"])
-            cont = upper - lower >= 2.0 * math.pi - 1e-9
-        joints.append(JointSpec(j.attrib["name"], lower, upper, vel, cont))
-    chain_links = [chain[0].find("parent").attrib["link"]] + [  # type: ignore[union-attr]
-        j.find("child").attrib["link"]  # type: ignore[union-attr]
-        for j in chain
-    ]
-    with_collision = {
-        lk.attrib["name"] for lk in root.findall("link") if lk.find("collision") is not None
-    }
-    links = tuple(lk for lk in chain_links if lk in with_collision)
+    """Build a :class:`RobotModel` from a URDF file (serial chain root → ``tip``), after the
+    checks of :func:`~nehmo_core.robots.urdf_check.check_urdf` (one parser for both); its
+    ``facts`` default to the description's for ``name`` (none for a robot without one). A
+    revolute joint whose range spans a full turn is treated as continuous."""
+    report = check_urdf(urdf, tip)
+    joints = tuple(
+        JointSpec(
+            j.name,
+            j.lower,
+            j.upper,
+            j.velocity,
+            j.kind == "continuous" or j.upper - j.lower >= 2.0 * math.pi - 1e-9,
+        )
+        for j in report.joints
+    )
     return RobotModel(
         name=name,
         urdf_path=urdf,
-        root_link=chain_links[0],
+        root_link=report.root,
         tip_link=tip,
-        joints=tuple(joints),
-        links=links,
+        joints=joints,
+        links=report.collision_links,
         disabled_collision_pairs=_parse_srdf(srdf),
         facts=robot_facts(name) if facts is None else facts,
     )
