@@ -135,7 +135,8 @@ def planner_params() -> dict[str, Param]:
     return out
 
 
-PARAMS: dict[str, Param] = {**NODE_PARAMS, **planner_params()}
+PLANNER_PARAMS = planner_params()
+PARAMS: dict[str, Param] = {**NODE_PARAMS, **PLANNER_PARAMS}
 #: Seconds between two WARN lines of one cause.
 WARN_EVERY = 2.0
 #: History of the command and status publishers (reliable, keep last): 2 s at 25 Hz, so a
@@ -199,7 +200,7 @@ class ArmPlannerNode(Node):
             raise InvalidValueError(
                 "opt.deadline", f"must be < 1/rate = {1.0 / rate:.4g} s (0: 75 %)", deadline
             )
-        given = {k: _typed(p[k]) for k in planner_params() if k != "opt.deadline"}
+        given = {k: _typed(p[k]) for k in PLANNER_PARAMS if k != "opt.deadline"}
         settings = PlannerSettings().override(
             {**given, "opt.deadline": deadline, "opt.tick": 1.0 / rate}
         )

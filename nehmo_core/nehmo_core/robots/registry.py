@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from nehmo_core.robots.descriptions import DATA_DIR, robot_description, robot_names
+from nehmo_core.robots.descriptions import DATA_DIR, description_paths, load_description
 from nehmo_core.robots.model import RobotFacts
 
 __all__ = [
@@ -50,9 +50,8 @@ HA_BENCHMARK_ROBOT = UR5
 
 def robot_facts(name: str) -> RobotFacts:
     """The facts of robot ``name``'s description (none for a robot that has no description)."""
-    if name not in robot_names():
-        return RobotFacts()
-    return robot_description(name).facts
+    path = description_paths().get(name)
+    return RobotFacts() if path is None else load_description(path).facts
 
 
 SHIPPED = "shipped"

@@ -14,13 +14,14 @@ element and what is missing or wrong.
 
 from __future__ import annotations
 
-import importlib.metadata
+import contextlib
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
 from nehmo_core.errors import ModelFileError
+from nehmo_core.robots.descriptions import example_robot_data_share
 
 __all__ = ["ChainJoint", "UrdfReport", "check_urdf", "mesh_path", "package_roots"]
 
@@ -75,14 +76,8 @@ def package_roots(urdf: Path) -> list[Path]:
     """Folders a ``package://NAME/`` URI may be relative to: every folder above the URDF, and
     the ``example-robot-data`` share folder when that package is installed."""
     roots = list(urdf.resolve().parents)
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-        for f in dist.files or []:
-            if str(f).endswith("share/example-robot-data/package.xml"):
-                roots.append(Path(str(dist.locate_file(f))).parents[1])
-                break
-    except importlib.metadata.PackageNotFoundError:
-        pass
+    with contextlib.suppress(ModelFileError):  # not installed: the folders above the URDF
+        roots.append(example_robot_data_share().parent)
     return roots
 
 
