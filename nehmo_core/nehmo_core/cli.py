@@ -27,6 +27,12 @@ _COMMANDS: dict[str, tuple[str, str, str, str]] = {
         "run",
         "evaluate planners on the paper's setups (metrics from the logs)",
     ),
+    "pair": (
+        "nehmo_core.pairs.cli",
+        "add_arguments",
+        "run",
+        "build a robot pair's learned distance, value functions and certificates in one command",
+    ),
     "robot": (
         "nehmo_core.robots.robot_cli",
         "add_arguments",

@@ -72,6 +72,9 @@ def keypoints_expression(keypoints: nn.Module, q: ca.MX) -> ca.MX:
         for i in range(1, k + 1):
             s = i / (k + 1)
             pts.append((1.0 - s) * pa + s * pb)
+    for link, offset in keypoints.points:  # type: ignore[union-attr]
+        T = tf[link]
+        pts.append(T[:3, 3] + ca.mtimes(T[:3, :3], ca.DM(offset)))
     return ca.horzcat(*pts)
 
 

@@ -12,7 +12,6 @@ import torch
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, as_options
 from nehmo_core.geometry.distance_data import (
-    BASE_RANGE,
     CONDITIONED_PAIRS,
     PAIRS,
     DatasetSpec,
@@ -26,6 +25,7 @@ from nehmo_core.geometry.distance_train import (
     train,
 )
 from nehmo_core.hjr.train_cli import parse_count
+from nehmo_core.robots.registry import pair_base_range
 
 ALL_PAIRS = sorted([*PAIRS, *CONDITIONED_PAIRS])
 _GENERATE_OPTIONS = {"n_uniform": "--uniform", "n_boundary": "--boundary"}
@@ -176,7 +176,7 @@ def _train(args: argparse.Namespace) -> int:
         "what": "learned signed distance [m] between the two arms' collision geometry",
         "inputs": (
             "q = (q_arm1, q_arm2, r): joints [rad] in each robot's URDF joint order, arm 2's base "
-            f"at (r, 0, 0) facing arm 1, r in {list(BASE_RANGE)} m"
+            f"at (r, 0, 0) facing arm 1, r in {list(pair_base_range(args.pair))} m"
             if args.pair in CONDITIONED_PAIRS
             else "q = (q_arm1, q_arm2) [rad] in each robot's URDF joint order"
         ),

@@ -36,8 +36,9 @@ base distance r in BASE_RANGE: the pose-conditioned models (one for every layout
 SWAPPED_PAIRS: dict[str, str] = registry.SWAPPED_PAIRS
 """Arm-pair system name → the pair whose learned distance it reuses with the arms' roles
 exchanged (its arm 1 is the pair's arm 2): the Kinova's side of the UR5-Kinova pairs."""
-BASE_RANGE = (0.25, 1.7)
-"""Base distances [m] the conditioned models are trained on (Ha et al.'s layouts: 0.31-1.60)."""
+BASE_RANGE = registry.DEFAULT_BASE_RANGE
+"""Base distances [m] the hand-registered conditioned models are trained on (Ha et al.'s
+layouts: 0.31-1.60); a built pair's own range: :func:`.registry.pair_base_range`."""
 CUTOFF = 1.0
 """Distances are resolved up to this value [m]; farther pairs are labelled with it."""
 
@@ -97,6 +98,34 @@ def sampling_box(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
     lo = np.where(robot.continuous, -np.pi, np.maximum(robot.lower, -np.pi))
     hi = np.where(robot.continuous, np.pi, np.minimum(robot.upper, np.pi))
     return lo, hi
+
+
+JOINT_SLACK = 0.3
+"""[rad] How far a ``limits``-domain pair's models reach beyond each limited joint's limits:
+what a joint moves at 0.5 rad/s within the value function's 0.6 s horizon."""
+
+
+def joint_domain(robot: RobotModel, yaw_first: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(low, high, periodic)`` per joint of a ``limits``-domain pair model: the base-yaw joint
+    (``yaw_first``: a conditioned pair's, which also turns with the layout) and continuous joints
+    over (−π, π], periodic; every other joint within its limits widened by :data:`JOINT_SLACK`."""
+    periodic = np.array(robot.continuous, dtype=bool)
+    if yaw_first:
+        periodic[0] = True
+    lo = np.where(periodic, -np.pi, robot.lower - JOINT_SLACK)
+    hi = np.where(periodic, np.pi, robot.upper + JOINT_SLACK)
+    return lo, hi, periodic
+
+
+def pair_joint_domain(pair: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Both arms' :func:`joint_domain` for a ``limits``-domain pair (in the system's order);
+    None for a ``circle`` pair."""
+    if registry.arm_pair(pair).domain != "limits":
+        return None
+    cell, a, b = system_pair_cell(pair)
+    conditioned = SWAPPED_PAIRS.get(pair, pair) in CONDITIONED_PAIRS
+    parts = [joint_domain(cell.arm(x).robot, conditioned) for x in (a, b)]
+    return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)
@@ -187,12 +216,17 @@ def exact_distances(pair: str, q: np.ndarray, workers: int = 1, desc: str = "") 
 
 def pair_box(pair: str) -> tuple[np.ndarray, np.ndarray]:
     """Sampling bounds of a pair's model input: both arms' joints [rad] (and ``r`` [m])."""
-    cell, a, b = pair_cell(pair)
-    lo1, hi1 = sampling_box(cell.arm(a).robot)
-    lo2, hi2 = sampling_box(cell.arm(b).robot)
-    lo, hi = np.concatenate([lo1, lo2]), np.concatenate([hi1, hi2])
+    domain = pair_joint_domain(pair)
+    if domain is not None:
+        lo, hi = domain[0], domain[1]
+    else:
+        cell, a, b = pair_cell(pair)
+        lo1, hi1 = sampling_box(cell.arm(a).robot)
+        lo2, hi2 = sampling_box(cell.arm(b).robot)
+        lo, hi = np.concatenate([lo1, lo2]), np.concatenate([hi1, hi2])
     if pair in CONDITIONED_PAIRS:
-        lo, hi = np.append(lo, BASE_RANGE[0]), np.append(hi, BASE_RANGE[1])
+        r_lo, r_hi = registry.pair_base_range(pair)
+        lo, hi = np.append(lo, r_lo), np.append(hi, r_hi)
     return lo, hi
 
 

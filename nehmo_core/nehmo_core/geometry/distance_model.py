@@ -36,11 +36,11 @@ from nehmo_core.robots.registry import (
     ROBOT_NAMES,
     SHIPPED,
     distance_pairs,
+    model_file,
     robot_facts,
 )
 
 FORMAT_VERSION = 1
-MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,10 @@ class _Keypoints(nn.Module):
         self.kin = ArmKinematics(robot, base)
         self.origins: list[str] = list(robot.facts.keypoints)
         self.segments: list[tuple[str, str, int]] = list(robot.facts.keypoint_segments)
-        self.count = len(self.origins) + sum(s[2] for s in self.segments)
+        self.points: list[tuple[str, tuple[float, float, float]]] = [
+            (link, (x, y, z)) for link, x, y, z in robot.facts.keypoint_points
+        ]
+        self.count = len(self.origins) + sum(s[2] for s in self.segments) + len(self.points)
 
     def forward(self, q: torch.Tensor) -> torch.Tensor:
         tf = self.kin.link_transforms(q)
@@ -82,6 +85,9 @@ class _Keypoints(nn.Module):
             for i in range(1, k + 1):
                 s = i / (k + 1)
                 pts.append((1.0 - s) * pa + s * pb)
+        for link, offset in self.points:
+            T = tf[link]
+            pts.append(T[:, :3, 3] + T[:, :3, :3] @ T.new_tensor(offset))
         return torch.stack(pts, dim=1)  # (B, P, 3)
 
 
@@ -218,7 +224,7 @@ def load_distance_file(path: Path, expect_pair: str | None = None) -> PairDistan
 def distance_model_path(pair: str) -> Path:
     """Where the distance model of ``pair`` lives: ``models/distance_<pair>.safetensors`` (what
     ``nehmo distance train`` and ``calibrate`` write unless given another path)."""
-    return MODELS_DIR / f"distance_{pair}.safetensors"
+    return model_file(pair, f"distance_{pair}.safetensors")
 
 
 OPTIONAL_DISTANCE_MODELS = distance_pairs(OPTIONAL)

@@ -12,13 +12,13 @@ from tqdm import tqdm
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.geometry.distance_data import (
-    BASE_RANGE,
     CONDITIONED_PAIRS,
     CUTOFF,
     PAIRS,
     pair_cell,
 )
 from nehmo_core.geometry.distance_model import DistanceModelConfig, PairDistanceModel
+from nehmo_core.robots.registry import pair_base_range
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,7 @@ def new_model(pair: str, hidden: tuple[int, ...]) -> PairDistanceModel:
         base2_xyz=arm2.base.xyz,
         base2_rpy=arm2.base.rpy,
         hidden=hidden,
-        base2_range=BASE_RANGE if pair in CONDITIONED_PAIRS else None,
+        base2_range=pair_base_range(pair) if pair in CONDITIONED_PAIRS else None,
     )
     return PairDistanceModel(cfg)
 

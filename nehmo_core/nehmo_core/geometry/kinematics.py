@@ -8,6 +8,9 @@ it is cheap at batch 1 (the planner) and differentiable (autograd) at any batch 
 
 from __future__ import annotations
 
+import contextlib
+import importlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +41,19 @@ def _skew(axis: torch.Tensor) -> torch.Tensor:
     return torch.tensor([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]], dtype=axis.dtype)
 
 
+@contextlib.contextmanager
+def _quiet_urdf_parser() -> Iterator[None]:
+    """pytorch-kinematics' URDF parser writes a line per attribute it does not model (e.g. the
+    Panda's ``dynamics`` friction terms): none of them matters for kinematics; drop them."""
+    core = importlib.import_module("pytorch_kinematics.urdf_parser_py.xml_reflection.core")
+    before = core.on_error
+    core.on_error = lambda message: None
+    try:
+        yield
+    finally:
+        core.on_error = before
+
+
 class ArmKinematics:
     """Forward kinematics of one arm at a base pose.
 
@@ -50,9 +66,10 @@ class ArmKinematics:
     ) -> None:
         self.robot = robot
         self.dtype = dtype
-        chain = pk.build_serial_chain_from_urdf(
-            robot.urdf_path.read_bytes(), robot.tip_link, robot.root_link
-        ).to(dtype=dtype)
+        with _quiet_urdf_parser():
+            chain = pk.build_serial_chain_from_urdf(
+                robot.urdf_path.read_bytes(), robot.tip_link, robot.root_link
+            ).to(dtype=dtype)
         self.pk_chain = chain
         names = list(robot.joint_names)
         self.T_world_base = torch.as_tensor((base or Pose()).matrix(), dtype=dtype)

@@ -24,7 +24,7 @@ from nehmo_core.errors import (
 from nehmo_core.hjr.networks import ValueFunction, ValueNetwork
 from nehmo_core.hjr.systems import HJISystem, make_system
 from nehmo_core.hjr.train_settings import Schedule, TrainSettings
-from nehmo_core.robots.registry import OPTIONAL, SHIPPED, value_variants
+from nehmo_core.robots.registry import OPTIONAL, SHIPPED, model_file, value_variants
 
 __all__ = [
     "CHECKPOINT",
@@ -126,11 +126,8 @@ def _strip_prefix(tensors: dict[str, Tensor], prefix: str) -> dict[str, Tensor]:
     return {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
 
 
-MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
-
-
 def _value_file(name: str, variant: str) -> Path:
-    return MODELS_DIR / f"value_{name}_{variant.replace('+', '_')}.safetensors"
+    return model_file(name, f"value_{name}_{variant.replace('+', '_')}.safetensors")
 
 
 OPTIONAL_VALUE_FUNCTIONS: dict[str, tuple[str, ...]] = value_variants(OPTIONAL)

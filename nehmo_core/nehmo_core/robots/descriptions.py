@@ -9,6 +9,7 @@ A robot ``NAME`` is a folder ``NAME/`` holding ``robot.yaml``::
     facts:                          # optional (RobotFacts): learned-distance keypoints,
       keypoints: [...]              # CHOMP's sphere radius, the scenario sampler's ranges
       keypoint_segments: [[a, b, k], ...]
+      keypoint_points: [[link, x, y, z], ...]   # points fixed in a link frame [m]
       sphere_radius: 0.08
       sampling_ranges: [[low, high], ...]
 
@@ -46,7 +47,13 @@ DATA_DIR = Path(__file__).resolve().parent / "data"
 ENV = "NEHMO_ROBOTS"
 EXAMPLE_ROBOT_DATA = "example-robot-data:"
 _KEYS = {"name", "urdf", "srdf", "tip", "facts"}
-_FACT_KEYS = {"keypoints", "keypoint_segments", "sphere_radius", "sampling_ranges"}
+_FACT_KEYS = {
+    "keypoints",
+    "keypoint_segments",
+    "keypoint_points",
+    "sphere_radius",
+    "sampling_ranges",
+}
 
 
 @dataclass(frozen=True)
@@ -100,6 +107,10 @@ def _facts(raw: Any, where: str) -> RobotFacts:
             keypoints=tuple(str(k) for k in raw.get("keypoints", ())),
             keypoint_segments=tuple(
                 (str(a), str(b), int(k)) for a, b, k in raw.get("keypoint_segments", ())
+            ),
+            keypoint_points=tuple(
+                (str(link), float(x), float(y), float(z))
+                for link, x, y, z in raw.get("keypoint_points", ())
             ),
             sphere_radius=float(raw.get("sphere_radius", RobotFacts.sphere_radius)),
             sampling_ranges=None

@@ -44,6 +44,9 @@ class RobotFacts:
     keypoint set, so no learned distance); CHOMP's sphere chains run through them too."""
     keypoint_segments: tuple[tuple[str, str, int], ...] = ()
     """``(link a, link b, k)``: ``k`` more keypoints evenly between the two links' origins."""
+    keypoint_points: tuple[tuple[str, float, float, float], ...] = ()
+    """``(link, x, y, z)``: more keypoints fixed in a link's frame [m] (e.g. a hand's sides,
+    which no link origin on the flange axis sees)."""
     sphere_radius: float = 0.08
     """[m] Radius of CHOMP's body spheres, covering each link's section."""
     sampling_ranges: tuple[tuple[float, float], ...] | None = None

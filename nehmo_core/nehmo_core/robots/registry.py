@@ -15,8 +15,13 @@ here; it names no robot itself (``tests/test_robot_names.py`` checks that).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
+import yaml
+
+from nehmo_core.errors import InvalidValueError, ModelFileError, UnknownNameError
 from nehmo_core.robots.descriptions import DATA_DIR, description_paths, load_description
 from nehmo_core.robots.model import RobotFacts
 
@@ -25,12 +30,18 @@ __all__ = [
     "CONDITIONED_PAIRS",
     "FIXED_PAIRS",
     "HA_BENCHMARK_ROBOT",
+    "MODELS_DIR",
+    "MODELS_ENV",
     "PAIR_NAMES",
     "ROBOT_NAMES",
     "SWAPPED_PAIRS",
     "ArmPair",
     "distance_pairs",
+    "model_dirs",
+    "model_file",
+    "pair_base_range",
     "pairs_by_robots",
+    "read_pair_manifest",
     "robot_facts",
     "synthetic_pairs",
     "value_variants",
@@ -57,6 +68,15 @@ def robot_facts(name: str) -> RobotFacts:
 SHIPPED = "shipped"
 OPTIONAL = "optional"
 
+MODELS_DIR = Path(__file__).resolve().parents[1] / "models"
+"""The shipped models (distances, value functions, their cards and pair manifests)."""
+MODELS_ENV = "NEHMO_MODELS"
+"""Environment variable naming more model folders (separated like ``PATH``): where
+``nehmo pair build`` wrote a pair."""
+DEFAULT_BASE_RANGE = (0.25, 1.7)
+"""[m] Base distances of the hand-registered conditioned pairs (Ha et al.'s layouts: 0.31-1.60).
+A pair built by ``nehmo pair build`` derives its own range from the two robots' reach."""
+
 
 @dataclass(frozen=True)
 class ArmPair:
@@ -79,6 +99,15 @@ class ArmPair:
     distance: str | None = None
     values: tuple[str, ...] = ()
     optional_values: tuple[str, ...] = ()
+    base_range: tuple[float, float] | None = None
+    """[m] A conditioned pair's base distances (None: :data:`DEFAULT_BASE_RANGE`)."""
+    folder: Path = MODELS_DIR
+    """Where its model files are (a pair manifest's folder)."""
+    domain: str = "circle"
+    """Joint domain of its models: ``circle``, every joint over (−π, π] (the pairs registered
+    here); ``limits``, the base-yaw joint and continuous joints over (−π, π], every other joint
+    within its limits widened by what it can move within the value function's horizon (the pairs
+    of ``nehmo pair build``)."""
 
     def __post_init__(self) -> None:
         frames = (self.cell is not None) + self.conditioned + (self.swapped is not None)
@@ -130,7 +159,112 @@ ARM_PAIRS: tuple[ArmPair, ...] = (
     ),
     ArmPair("kinova_ur5_any", (KINOVA, UR5), swapped="ur5_kinova_any", optional_values=("bc+sym",)),
 )
+
+MANIFEST_SUFFIX = ".pairs.yaml"
+_MANIFEST_KEYS = {"name", "robots", "conditioned", "swapped", "base_range", "values"}
+
+
+def model_dirs() -> tuple[Path, ...]:
+    """The model folders: the shipped ``models/``, then those named in ``NEHMO_MODELS``."""
+    extra = [Path(p) for p in os.environ.get(MODELS_ENV, "").split(os.pathsep) if p]
+    return tuple(dict.fromkeys([MODELS_DIR, *extra]))
+
+
+def read_pair_manifest(path: Path) -> tuple[ArmPair, ...]:
+    """The pairs of one ``<name>.pairs.yaml`` (written by ``nehmo pair build``).
+
+    Each entry names a pair, its robots (controlled robot first) and its frame (``conditioned``
+    with ``base_range`` [m], or ``swapped``: another entry seen from its arm 2). Its models are
+    files beside the manifest and count as present once they exist (until then, loading one
+    says how to make it).
+    """
+    where = str(path)
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ModelFileError(f"{where}: not a readable YAML file ({exc})") from exc
+    if not isinstance(raw, dict) or not isinstance(raw.get("pairs"), list):
+        raise InvalidValueError(where, "must be a mapping with a list 'pairs'", raw)
+    out = []
+    for i, entry in enumerate(raw["pairs"]):
+        at = f"{where}: pairs[{i}]"
+        if not isinstance(entry, dict) or set(entry) - _MANIFEST_KEYS:
+            rule = f"must be a mapping with keys among {sorted(_MANIFEST_KEYS)}"
+            raise InvalidValueError(at, rule, entry)
+        robots = entry.get("robots")
+        if not (isinstance(robots, list) and len(robots) == 2) or not all(
+            isinstance(r, str) for r in robots
+        ):
+            raise InvalidValueError(f"{at}.robots", "must be two robot names", robots)
+        base_range = entry.get("base_range")
+        if base_range is not None:
+            ok = isinstance(base_range, list) and len(base_range) == 2
+            if not (ok and 0 < base_range[0] < base_range[1]):
+                rule = "must be [low, high] with 0 < low < high [m]"
+                raise InvalidValueError(f"{at}.base_range", rule, base_range)
+            base_range = (float(base_range[0]), float(base_range[1]))
+        swapped = entry.get("swapped")
+        try:
+            out.append(
+                ArmPair(
+                    str(entry.get("name")),
+                    (robots[0], robots[1]),
+                    conditioned=bool(entry.get("conditioned", False)),
+                    swapped=swapped,
+                    distance=None if swapped else OPTIONAL,
+                    optional_values=tuple(entry.get("values", ("bc+sym",))),
+                    base_range=base_range,
+                    folder=path.parent,
+                    domain="limits",
+                )
+            )
+        except ValueError as exc:
+            raise InvalidValueError(at, str(exc), entry) from None
+    return tuple(out)
+
+
+def _manifest_pairs() -> tuple[ArmPair, ...]:
+    found: list[ArmPair] = []
+    for folder in model_dirs():
+        if not folder.is_dir():
+            raise ModelFileError(f"{MODELS_ENV}: not a folder: {folder}")
+        for path in sorted(folder.glob(f"*{MANIFEST_SUFFIX}")):
+            found.extend(read_pair_manifest(path))
+    return tuple(found)
+
+
+ARM_PAIRS = (*ARM_PAIRS, *_manifest_pairs())
+_BY_NAME: dict[str, ArmPair] = {}
+for _pair in ARM_PAIRS:
+    if _pair.name in _BY_NAME:
+        raise ModelFileError(
+            f"arm pair {_pair.name!r} is defined twice: in {_BY_NAME[_pair.name].folder} and in "
+            f"{_pair.folder}"
+        )
+    _BY_NAME[_pair.name] = _pair
 PAIR_NAMES: tuple[str, ...] = tuple(p.name for p in ARM_PAIRS)
+
+
+def arm_pair(name: str) -> ArmPair:
+    """The registered pair ``name``."""
+    if name not in _BY_NAME:
+        raise UnknownNameError("arm pair", name, PAIR_NAMES)
+    return _BY_NAME[name]
+
+
+def model_file(pair: str, filename: str) -> Path:
+    """Where a model file of ``pair`` lives: beside its manifest (``models/`` for the pairs
+    registered here)."""
+    return arm_pair(pair).folder / filename
+
+
+def pair_base_range(pair: str) -> tuple[float, float]:
+    """[m] The base distances a conditioned pair's models cover (a swapped pair: its source's)."""
+    p = arm_pair(pair)
+    if p.swapped is not None:
+        p = arm_pair(p.swapped)
+    return p.base_range if p.base_range is not None else DEFAULT_BASE_RANGE
+
 
 FIXED_PAIRS: dict[str, tuple[str, str, str]] = {p.name: p.cell for p in ARM_PAIRS if p.cell}
 """Pair name → (cell, arm 1, arm 2) of the pairs in a shipped cell."""

@@ -11,11 +11,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-import nehmo_core
-from nehmo_core.errors import InvalidValueError
+from nehmo_core.errors import InvalidValueError, NehmoError
+from nehmo_core.robots.registry import MODELS_DIR, model_file
 from nehmo_core.verify.certify import Certificate
 
-MODELS_DIR = Path(nehmo_core.__file__).resolve().parent / "models"
 SUMMARY_KEYS = (
     "tau", "distribution", "delta", "samples", "violations", "epsilon", "confidence",
     "certified", "accepted_share", "wall_time_s", "command",
@@ -25,7 +24,10 @@ SUMMARY_KEYS = (
 def shipped_card_path(name: str, variant: str | None = None) -> Path:
     """The card of a shipped value function (``value_<pair>_<variant>.json``)."""
     slug = (variant or "bc+sym").replace("+", "_")
-    path = MODELS_DIR / f"value_{name}_{slug}.json"
+    try:
+        path = model_file(name, f"value_{name}_{slug}.json")
+    except NehmoError:
+        path = MODELS_DIR / f"value_{name}_{slug}.json"
     if not path.exists():
         raise InvalidValueError(
             "--card", "needs a shipped model name (and variant)", f"{name} {variant}"

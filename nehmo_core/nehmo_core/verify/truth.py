@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pybullet as pb
 import torch
 
-from nehmo_core.errors import NehmoError
+from nehmo_core.errors import NehmoError, UnknownNameError
 from nehmo_core.geometry.distance_data import (
     CONDITIONED_PAIRS,
     PAIRS,
@@ -68,8 +69,7 @@ class SphereCover:
         for name, index in world.links(arm_id).items():
             if not pb.getCollisionShapeData(body, index, physicsClientId=world.client):
                 continue  # no collision geometry
-            if name not in at_zero:
-                raise NehmoError(f"link {name!r} of {arm_id} collides but is not on the chain")
+            name = _on_chain(world, body, index, name, at_zero, arm_id)
             lo, hi = (np.array(v) for v in pb.getAABB(body, index, physicsClientId=world.client))
             side = hi - lo
             axis = int(np.argmax(side))
@@ -100,6 +100,19 @@ class SphereCover:
             parts.append(T[:, None, :3, :3] @ centres[None, :, :, None])
             parts[-1] = parts[-1][..., 0] + T[:, None, :3, 3]
         return torch.cat(parts, dim=1)
+
+
+def _on_chain(world: CellWorld, body: int, index: int, name: str, chain: Any, arm_id: str) -> str:
+    """The link whose frame carries link ``name``'s balls: itself when on the chain, else its
+    nearest ancestor on it (a link off the chain, such as a gripper finger held at its zero, is
+    rigid relative to that ancestor)."""
+    links = {i: n for n, i in world.links(arm_id).items()}
+    while name not in chain:
+        if index < 0:
+            raise NehmoError(f"link {name!r} of {arm_id} collides but hangs off no chain link")
+        index = pb.getJointInfo(body, index, physicsClientId=world.client)[16]
+        name = links[index]
+    return name
 
 
 class PairDistance:
@@ -183,6 +196,8 @@ class AnalyticBoundary:
 def exact_margin(system: HJISystem) -> PairDistance | AnalyticBoundary:
     """The exact margin of a system: PyBullet for shipped arm pairs, ``l`` otherwise."""
     shipped = (*PAIRS, *CONDITIONED_PAIRS, *SWAPPED_PAIRS)
-    if isinstance(system, ArmPairSystem) and system.name in shipped:
+    if isinstance(system, ArmPairSystem):
+        if system.name not in shipped:
+            raise UnknownNameError("arm pair (exact geometry)", system.name, shipped)
         return PairDistance(system)
     return AnalyticBoundary(system)

@@ -76,6 +76,7 @@ class ArmPairSystem(HJISystem):
     system_name: str = "arm_pair"
     joint_periodic: tuple[bool, ...] | None = None  # default: every joint periodic
     conditions: tuple[tuple[float, float], ...] = ()  # constant coordinates' (low, high)
+    joint_box: tuple[tuple[float, float], ...] | None = None  # per joint (low, high); None: ±π
 
     def __post_init__(self) -> None:
         for name in ("n1", "n2"):
@@ -105,6 +106,14 @@ class ArmPairSystem(HJISystem):
             raise InvalidValueError("joint_periodic", f"must have {n} entries", self.joint_periodic)
         else:
             object.__setattr__(self, "joint_periodic", tuple(self.joint_periodic) + (False,) * m)
+        if self.joint_box is not None:
+            if len(self.joint_box) != n or any(not lo < hi for lo, hi in self.joint_box):
+                raise InvalidValueError(
+                    "joint_box", f"must be {n} pairs (low, high) with low < high", self.joint_box
+                )
+            object.__setattr__(
+                self, "joint_box", tuple((float(lo), float(hi)) for lo, hi in self.joint_box)
+            )
         if isinstance(self.boundary_fn, nn.Module):
             self.boundary_fn.requires_grad_(False)
 
@@ -115,11 +124,15 @@ class ArmPairSystem(HJISystem):
     @property
     def lower(self) -> np.ndarray:
         low = [c[0] for c in self.conditions]
+        if self.joint_box is not None:
+            return np.array([b[0] for b in self.joint_box] + low)
         return np.concatenate([-np.pi * np.ones(self.n1 + self.n2), low])
 
     @property
     def upper(self) -> np.ndarray:
         high = [c[1] for c in self.conditions]
+        if self.joint_box is not None:
+            return np.array([b[1] for b in self.joint_box] + high)
         return np.concatenate([np.pi * np.ones(self.n1 + self.n2), high])
 
     @property
@@ -150,6 +163,7 @@ class ArmPairSystem(HJISystem):
             "symmetry_offset": np.asarray(self.symmetry_offset)[:n].tolist(),
             "train_region": {"joint": region.joint, "low": region.low, "high": region.high},
             "joint_periodic": list(self.periodic)[:n],
+            **({"joint_box": [list(b) for b in self.joint_box]} if self.joint_box else {}),
         }
 
     def boundary(self, x: Tensor) -> Tensor:

@@ -14,11 +14,18 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from nehmo_core.geometry.distance_data import SWAPPED_PAIRS, pair_cell
+from nehmo_core.errors import NehmoError
+from nehmo_core.geometry.distance_data import (
+    SWAPPED_PAIRS,
+    pair_cell,
+    pair_joint_domain,
+    system_pair_cell,
+)
 from nehmo_core.geometry.distance_model import SHIPPED_DISTANCE_MODELS, load_distance_model
-from nehmo_core.geometry.symmetry import robot_mirror_map
+from nehmo_core.geometry.symmetry import JointMap, robot_mirror_map
 from nehmo_core.hjr.systems.arm_pair import ArmPairSystem, JointInterval
 from nehmo_core.hjr.systems.registry import ARM_PAIR_NAMES
+from nehmo_core.robots.model import RobotModel, wrap_angle
 
 ARM_PAIRS = tuple(p for p in ARM_PAIR_NAMES if SWAPPED_PAIRS.get(p, p) in SHIPPED_DISTANCE_MODELS)
 """The arm pairs of :data:`ARM_PAIR_NAMES` whose learned distance is in ``models/`` (the ones
@@ -52,47 +59,66 @@ class SwappedBoundary(torch.nn.Module):
         return self.distance(torch.cat([second, first, rest], dim=1))
 
 
-def make_arm_pair_system(pair: str) -> ArmPairSystem:
-    """The HJI system of a shipped arm pair (``ū = d̄ = 0.5`` rad/s, ``T = 0.6`` s)."""
+def pair_symmetry(pair: str) -> JointMap:
+    """The mirror map of a pair's joint vector (arm 1's, then arm 2's)."""
+    cell, a, b = pair_cell(SWAPPED_PAIRS.get(pair, pair))
     if pair in SWAPPED_PAIRS:
-        return _swapped_system(pair)
-    cell, a, b = pair_cell(pair)
+        a, b = b, a
+    return robot_mirror_map(cell.arm(a).robot.name) + robot_mirror_map(cell.arm(b).robot.name)
+
+
+def make_arm_pair_system(pair: str) -> ArmPairSystem:
+    """The HJI system of a registered arm pair (``ū = d̄ = 0.5`` rad/s, ``T = 0.6`` s).
+
+    A swapped pair's boundary is its source's distance with the arms exchanged. The mirror maps
+    of both robots make the symmetry (used by ``bc+sym``); ``X_train`` is the half of arm 2's
+    first joint that its map sends onto the other half. A ``limits``-domain pair (built by
+    ``nehmo pair build``) spans each limited joint's limits, widened
+    (:func:`~nehmo_core.geometry.distance_data.pair_joint_domain`); the others every joint's circle.
+    """
+    source = SWAPPED_PAIRS.get(pair, pair)
+    cell, a, b = system_pair_cell(pair)
     r1, r2 = cell.arm(a).robot, cell.arm(b).robot
-    f = robot_mirror_map(r1.name) + robot_mirror_map(r2.name)
-    # Both joint-1 maps are q → π − q: the halves [−π/2, π/2] and its complement swap.
-    assert f.sign[r1.dof] == -1.0 and np.isclose(f.offset[r1.dof], np.pi)
-    distance = load_distance_model(pair).float()
+    f = _pair_map(r1, r2)
+    distance = load_distance_model(source).float()
+    boundary = SwappedBoundary(distance, r1.dof, r2.dof) if pair in SWAPPED_PAIRS else distance
     # A conditioned pair (``*_any``): r is a constant coordinate; the mirror y → −y keeps both
     # bases on the x axis, so it is the same joint map at every r.
     base_range = distance.config.base2_range
+    domain = pair_joint_domain(pair)
     return ArmPairSystem(
         conditions=(base_range,) if base_range is not None else (),
-        boundary_fn=distance,
+        boundary_fn=boundary,
         n1=r1.dof,
         n2=r2.dof,
         symmetry_sign=np.array(f.sign),
         symmetry_offset=np.array(f.offset),
-        train_region=JointInterval(joint=r1.dof, low=-np.pi / 2, high=np.pi / 2),
+        train_region=_train_region(f, r1.dof),
         system_name=pair,
+        joint_periodic=None if domain is None else tuple(bool(v) for v in domain[2]),
+        joint_box=None if domain is None else tuple(zip(domain[0], domain[1], strict=True)),
     )
 
 
-def _swapped_system(name: str) -> ArmPairSystem:
-    """A game whose controlled arm is arm 2 of the learned distance it reuses (the Kinova's
-    side of a UR5-Kinova pair): the same mirror maps, in the swapped order."""
-    cell, pair_first, pair_second = pair_cell(SWAPPED_PAIRS[name])
-    own, other = cell.arm(pair_second).robot, cell.arm(pair_first).robot
-    f = robot_mirror_map(own.name) + robot_mirror_map(other.name)
-    assert f.sign[own.dof] == -1.0 and np.isclose(f.offset[own.dof], np.pi)
-    distance = load_distance_model(SWAPPED_PAIRS[name]).float()
-    base_range = distance.config.base2_range
-    return ArmPairSystem(
-        conditions=(base_range,) if base_range is not None else (),
-        boundary_fn=SwappedBoundary(distance, own.dof, other.dof),
-        n1=own.dof,
-        n2=other.dof,
-        symmetry_sign=np.array(f.sign),
-        symmetry_offset=np.array(f.offset),
-        train_region=JointInterval(joint=own.dof, low=-np.pi / 2, high=np.pi / 2),
-        system_name=name,
-    )
+def _pair_map(r1: RobotModel, r2: RobotModel) -> JointMap:
+    """Both robots' mirror maps; the identity where a robot has none (its pairs train ``bc``)."""
+    parts = []
+    for robot in (r1, r2):
+        try:
+            parts.append(robot_mirror_map(robot.name))
+        except NehmoError:
+            n = robot.dof
+            parts.append(JointMap((1.0,) * n, (0.0,) * n, tuple(bool(c) for c in robot.continuous)))
+    return parts[0] + parts[1]
+
+
+def _train_region(f: JointMap, joint: int) -> JointInterval:
+    """``X_train``: the half of ``joint`` (arm 2's first, a reflection ``q → −q + c`` under the
+    mirror) that the map sends onto the other half, ``[c/2 − π, c/2]`` (wrapped)."""
+    if f.sign[joint] != -1.0:  # no halves to fold (no mirror map): X_train is everything
+        return JointInterval(joint=joint, low=-np.inf, high=np.inf)
+    centre = float(wrap_angle(f.offset[joint] / 2.0 - np.pi / 2.0))
+    low, high = centre - np.pi / 2, centre + np.pi / 2
+    if low < -np.pi - 1e-9:  # the half wraps past ±π: take the other one
+        low, high = low + np.pi, high + np.pi
+    return JointInterval(joint=joint, low=low, high=high)

@@ -232,17 +232,17 @@ def pair_geometry(pair: str) -> ModelGeometry:
     named arm pair (or a swapped one, ``kinova_ur5``, ``kinova_ur5_any``): what
     :func:`~nehmo_core.planning.models.pair_frame.match_pair` takes per model."""
     from nehmo_core.geometry.distance_data import (
-        BASE_RANGE,
         CONDITIONED_PAIRS,
         SWAPPED_PAIRS,
         system_pair_cell,
     )
+    from nehmo_core.robots.registry import pair_base_range
 
     model_cell, a, b = system_pair_cell(pair)
     arm1, arm2 = model_cell.arm(a), model_cell.arm(b)
     base2 = pose_from_matrix(relative_pose(arm1.base, arm2.base))
     if SWAPPED_PAIRS.get(pair, pair) in CONDITIONED_PAIRS:
-        return arm1.robot.name, arm2.robot.name, base2, BASE_RANGE
+        return arm1.robot.name, arm2.robot.name, base2, pair_base_range(pair)
     return arm1.robot.name, arm2.robot.name, base2
 
 

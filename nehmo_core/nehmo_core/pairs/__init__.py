@@ -1,0 +1,1 @@
+"""Pair models from robot descriptions: ``nehmo pair build A B`` (:mod:`.build`)."""

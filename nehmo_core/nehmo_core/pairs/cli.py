@@ -1,0 +1,62 @@
+"""``nehmo pair``: build a robot pair's certified models in one command, or see a build's state."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from nehmo_core.errors import InvalidValueError
+from nehmo_core.pairs.build import BUDGETS, PairBuild, default_models_dir, describe, pair_names
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="pair_command", required=True, metavar="ACTION")
+    b = sub.add_parser(
+        "build",
+        help="labels, learned distance, value functions, certificates and cards of a robot pair",
+        description=(
+            "Build the pose-conditioned models of robots A and B (B may equal A). Resumable: "
+            "run it again with the same --work and it goes on where it stopped."
+        ),
+    )
+    b.add_argument("robot_a", help="registered robot (nehmo robot add makes one from a URDF)")
+    b.add_argument("robot_b", help="registered robot (may be robot_a)")
+    b.add_argument(
+        "--models",
+        type=Path,
+        help="model folder the pair's files go to (default: first NEHMO_MODELS folder, else "
+        "./nehmo_models); add it to NEHMO_MODELS to plan with the pair",
+    )
+    b.add_argument("--work", type=Path, help="work folder (default: runs/pairs/<pair>)")
+    b.add_argument("--budget", default="standard", help=f"one of {sorted(BUDGETS)}")
+    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--threads", type=int, default=2, help="CPU threads / label workers")
+    b.add_argument("--no-progress", action="store_true", help="no progress bars")
+    s = sub.add_parser("status", help="what a build has done, stage by stage")
+    s.add_argument("work", type=Path, help="the build's work folder")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.pair_command == "status":
+        state_path = args.work / "state.json"
+        if not state_path.exists():
+            raise InvalidValueError("work", "holds no pair build (no state.json)", str(args.work))
+        print(describe(json.loads(state_path.read_text())))
+        return 0
+    pair = pair_names(args.robot_a, args.robot_b)[0]
+    build = PairBuild(
+        args.robot_a,
+        args.robot_b,
+        models=args.models or default_models_dir(),
+        work=args.work or Path("runs") / "pairs" / pair,
+        budget=args.budget,
+        seed=args.seed,
+        threads=args.threads,
+        progress=not args.no_progress,
+    )
+    card = build.run()
+    print(f"{pair}: models and card in {build.models} ({card.name})")
+    return 0
