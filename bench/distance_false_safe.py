@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from nehmo_core.errors import NehmoError
-from nehmo_core.geometry.distance_model import MODELS_DIR, load_distance_model
+from nehmo_core.geometry.distance_model import load_distance_model
 from nehmo_core.hjr import make_system
+from nehmo_core.robots.registry import MODELS_DIR
 from nehmo_core.verify.distance import NearVisited, certify_distance, false_safe, jittered
 from nehmo_core.verify.distributions import UniformBox, episode_logs, visited_pair_states
 from nehmo_core.verify.truth import exact_margin

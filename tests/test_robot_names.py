@@ -18,11 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from nehmo_core.geometry.distance_model import MODELS_DIR
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.robots import ROBOT_NAMES, cell_names, load_cell, load_robot
 from nehmo_core.robots.descriptions import robot_description
-from nehmo_core.robots.registry import ARM_PAIRS, PAIR_NAMES, SWAPPED_PAIRS, robot_facts
+from nehmo_core.robots.registry import ARM_PAIRS, MODELS_DIR, PAIR_NAMES, SWAPPED_PAIRS, robot_facts
 
 ROOT = Path(__file__).resolve().parents[1]
 CORE = ROOT / "nehmo_core" / "nehmo_core"

@@ -18,12 +18,12 @@ from nehmo_core.geometry.distance_data import (
     uniform_samples,
 )
 from nehmo_core.geometry.distance_model import (
-    MODELS_DIR,
     SHIPPED_DISTANCE_MODELS,
     load_distance_file,
     load_distance_model,
 )
 from nehmo_core.geometry.symmetry import robot_mirror_map
+from nehmo_core.robots.registry import MODELS_DIR
 
 PAIRS = list(SHIPPED_DISTANCE_MODELS)
 # pairs whose uniform joint samples include enough contacts for a spot check (the farther UR5

@@ -4,6 +4,7 @@ Kinova-controls game ``kinova_ur5_any``, on untrained networks (no weights are s
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import math
 from collections.abc import Iterator
@@ -40,6 +41,7 @@ from nehmo_core.planning.models.pair_frame import match_pair
 from nehmo_core.planning.models.registry import ModelRegistry, pair_geometry
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.robots import registry
 from nehmo_core.robots.loader import load_cell, load_robot
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
 from nehmo_core.verify.truth import exact_margin, pair_arms
@@ -115,8 +117,9 @@ def test_the_pairs_are_known_and_name_their_files() -> None:
 def test_untrained_models_are_a_clear_error(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    monkeypatch.setattr(dm, "MODELS_DIR", tmp_path)
-    monkeypatch.setattr(model_files, "MODELS_DIR", tmp_path)
+    for name in ("ur5_kinova_any", "kinova_ur5_any"):  # as if their files were elsewhere
+        pair = registry.arm_pair(name)
+        monkeypatch.setitem(registry._BY_NAME, name, dataclasses.replace(pair, folder=tmp_path))
     for name in ("ur5_kinova_any", "kinova_ur5_any"):  # as if not found at import
         monkeypatch.delitem(model_files.SHIPPED_VALUE_FUNCTIONS, name, raising=False)
     with pytest.raises(ModelFileError, match="nehmo distance train --pair ur5_kinova_any"):

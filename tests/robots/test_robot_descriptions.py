@@ -36,7 +36,7 @@ def user_robots(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Pat
 
 
 def test_the_shipped_robots_are_descriptions_with_their_facts() -> None:
-    assert set(ROBOT_NAMES) == {"ur5", "kinova_gen3_6dof", "planar_2link"}
+    assert set(ROBOT_NAMES) == {"ur5", "kinova_gen3_6dof", "panda", "planar_2link"}
     ur5 = load_robot("ur5")
     assert ur5.dof == 6 and ur5.tip_link == "ee_link"
     # the paper's ranges in this project's joint zeros (−π/2 on shoulder_lift and wrist_1)
@@ -107,5 +107,5 @@ def test_a_name_described_twice_or_unknown_is_an_error(user_robots: Path) -> Non
     with pytest.raises(ModelFileError, match="'ur5' is described twice"):
         descriptions.robot_names()
     (user_robots / "ur5" / "robot.yaml").unlink()
-    with pytest.raises(UnknownNameError, match="unknown robot 'panda'"):
-        load_robot("panda")
+    with pytest.raises(UnknownNameError, match="unknown robot 'iiwa14'"):
+        load_robot("iiwa14")

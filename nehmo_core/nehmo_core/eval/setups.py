@@ -98,6 +98,14 @@ SETUPS: dict[str, Setup] = {
             description="UR5 + Kinova Gen3, scenarios where naive arms collide (Table IV)",
         ),
         Setup("ur5_kinova", "ur5_kinova", 20.0, description="UR5 + Kinova Gen3, random scenarios"),
+        Setup("dual_panda", "dual_panda", 20.0, description="two Pandas 0.6 m apart, facing"),
+        Setup("ur5_panda", "ur5_panda", 20.0, description="UR5 + Panda 0.6 m apart, facing"),
+        Setup(
+            "mixed_four",
+            "mixed_four",
+            30.0,
+            description="two UR5s and two Pandas at irregular poses (0.70-1.21 m apart)",
+        ),
     )
 }
 

@@ -268,6 +268,18 @@ class PairBuild:
             )
         return command
 
+    def _python(self, what: str, code: str) -> Any:
+        """Run ``code`` in a fresh process (the pair registered through the model folder) and
+        return the JSON it printed after :data:`RESULT` (PyBullet prints to stdout too)."""
+        code = f"RESULT = {RESULT!r}\n" + code
+        proc = subprocess.run(
+            [sys.executable, "-c", code], env=self._env(), capture_output=True, text=True
+        )
+        at = proc.stdout.rfind(RESULT)
+        if proc.returncode != 0 or at < 0:
+            raise NehmoError(f"{what} failed: {proc.stderr.strip()[-400:]}")
+        return json.loads(proc.stdout[at + len(RESULT) :].splitlines()[0])
+
     # -- stages ------------------------------------------------------------------------------------
 
     def _check(self) -> StageRecord:
@@ -361,16 +373,11 @@ class PairBuild:
             "dm = dd.exact_distances(pair, np.c_[m, -yaw])\n"
             "near = np.abs(d) < 0.3\n"
             "diff = np.abs(d - dm)[near]\n"
-            "print(json.dumps({'states': n, 'near_contact_states': int(near.sum()),"
+            "print(RESULT, json.dumps({'states': n, 'near_contact_states': int(near.sum()),"
             " 'mean_abs_diff_near_m': float(diff.mean()) if diff.size else 0.0,"
             " 'max_abs_diff_near_m': float(diff.max()) if diff.size else 0.0}))\n"
         )
-        proc = subprocess.run(
-            [sys.executable, "-c", code], env=self._env(), capture_output=True, text=True
-        )
-        if proc.returncode != 0:
-            raise NehmoError(f"mirror check of {self.pair} failed: {proc.stderr.strip()[-400:]}")
-        result = json.loads(proc.stdout.strip().splitlines()[-1])
+        result = self._python(f"mirror check of {self.pair}", code)
         symmetric = result["mean_abs_diff_near_m"] <= MIRROR_TOLERANCE
         result["variant"] = "bc+sym" if symmetric else "bc"
         result["why"] = (
@@ -469,14 +476,9 @@ class PairBuild:
             "cert = certify_distance(load_distance_model(pair), margin, UniformBox(system),"
             f" np.random.default_rng(seed), samples=n, alpha={self.budget.alpha})\n"
             "margin.close()\n"
-            "print(json.dumps({**cert.to_dict(), 'seed': seed}))\n"
+            "print(RESULT, json.dumps({**cert.to_dict(), 'seed': seed}))\n"
         )
-        proc = subprocess.run(
-            [sys.executable, "-c", code], env=self._env(), capture_output=True, text=True
-        )
-        if proc.returncode != 0:
-            raise NehmoError(f"distance certificate failed: {proc.stderr.strip()[-400:]}")
-        cert = json.loads(proc.stdout.strip().splitlines()[-1])
+        cert = self._python("distance certificate", code)
         card_path = self._distance_card()
         card = json.loads(card_path.read_text())
         card["certificates"] = [{**cert, "command": "nehmo pair build (distance-certificate)"}]
@@ -551,16 +553,11 @@ class PairBuild:
             "x, _, share = draw_level_set(value, UniformBox(value.system), tau, eps, n, rng)\n"
             "m, who = worst_margins(value, margin, x, VerifySettings(tau=tau), rng, 'falsify')\n"
             "margin.close(); k = int((m <= 0).sum())\n"
-            "print(json.dumps({'tau': tau, 'epsilon': eps, 'states': int(len(x)), 'contacts': k,"
+            "print(RESULT, json.dumps({'tau': tau, 'epsilon': eps, 'states': int(len(x)), 'contacts': k,"
             " 'rate': k / len(x), 'bound': violation_bound(len(x), k, 1e-3), 'seed': seed,"
             " 'accepted_share': share}))\n"
         )
-        proc = subprocess.run(
-            [sys.executable, "-c", code], env=self._env(), capture_output=True, text=True
-        )
-        if proc.returncode != 0:
-            raise NehmoError(f"falsification of {game} failed: {proc.stderr.strip()[-400:]}")
-        result = json.loads(proc.stdout.strip().splitlines()[-1])
+        result = self._python(f"falsification of {game}", code)
         return StageRecord(f"falsify:{game}", 0.0, [], result)
 
     def _card(self) -> StageRecord:
@@ -587,6 +584,7 @@ class PairBuild:
         return StageRecord("card", 0.0, [], {"card": str(path)})
 
 
+RESULT = "NEHMO-RESULT "
 MIRROR_TOLERANCE = 0.002
 """[m] Largest mean change of the exact pair distance under the mirror maps, within 0.3 m of
 contact, for which a build trains ``bc+sym`` (the UR5's meshes: 0.7 mm); above it, ``bc``."""

@@ -65,11 +65,13 @@ draw arm by arm in cell order."""
 
 def sampling_box(robot: RobotModel) -> np.ndarray:
     """``(dof, 2)`` [rad]: the protocol's sampling interval of every joint of ``robot``: its
-    ``facts.sampling_ranges`` (the UR5's: the paper's, in this project's zeros), else its joint
-    limits clipped to ±π."""
+    ``facts.sampling_ranges`` (the UR5's: the paper's, in this project's zeros), else (−π, π]
+    for a joint that wraps and its limits for any other (the Panda's sixth joint reaches 3.75)."""
     if robot.facts.sampling_ranges is not None:
         return np.array(robot.facts.sampling_ranges, dtype=np.float64)
-    return np.stack([np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi)], axis=1)
+    lo = np.where(robot.continuous, -np.pi, robot.lower)
+    hi = np.where(robot.continuous, np.pi, robot.upper)
+    return np.stack([lo, hi], axis=1)
 
 
 def draw_order(cell: Cell) -> np.ndarray:

@@ -86,6 +86,20 @@ kind; the others serve the kinds whose variant they ship, when their files are p
 at their distance is otherwise reported as unconstrained)."""
 
 
+def pair_variant(source: str, variant: str) -> str:
+    """The variant a kind of ``variant`` uses for the named pair ``source``: ``variant`` itself,
+    except that a pair whose robots have no exact mirror map ships ``bc`` alone (``nehmo pair
+    build`` decides it on the exact geometry), which the ``bc+sym`` kinds then use."""
+    names = (*SHIPPED_VALUE_FUNCTIONS, *OPTIONAL_VALUE_FUNCTIONS)
+    if variant != "bc+sym" or source not in names:
+        return variant
+    declared = (
+        *SHIPPED_VALUE_FUNCTIONS.get(source, ()),
+        *OPTIONAL_VALUE_FUNCTIONS.get(source, ()),
+    )
+    return "bc" if set(declared) == {"bc"} else variant
+
+
 def robot_pairs(cell: Cell) -> list[tuple[str, str]]:
     """Ordered (own robot, peer robot) pairs of the cell's arms, without repeats."""
     pairs = []
@@ -154,7 +168,10 @@ class ModelRegistry:
                 name
                 for i, name in enumerate(names)
                 if i == 0
-                or (variant in SHIPPED_VALUE_FUNCTIONS.get(name, ()) and _cell_uses(name, cell))
+                or (
+                    pair_variant(name, variant) in SHIPPED_VALUE_FUNCTIONS.get(name, ())
+                    and _cell_uses(name, cell)
+                )
             )
         return out
 
@@ -178,9 +195,10 @@ class ModelRegistry:
         self, kind: str, source: str, pairs: tuple[tuple[str, str], ...]
     ) -> list[PairValueModel]:
         variant = OPT_KINDS[kind]
-        slug = variant.replace("+", "_")
         if source == SYNTHETIC:
             return self._synthetic(variant, pairs)
+        variant = pair_variant(source, variant)
+        slug = variant.replace("+", "_")
         if source in SHIPPED_VALUE_FUNCTIONS or source in OPTIONAL_VALUE_FUNCTIONS:
             try:
                 vf = load_value_function(source, variant=variant)

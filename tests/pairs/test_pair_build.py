@@ -1,0 +1,174 @@
+"""``nehmo pair build``: the whole pipeline at a tiny budget on a small arm described by the user,
+its resumption, the pair it registers in a fresh process, and the errors for bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import yaml
+
+from nehmo_core.cli import main
+from nehmo_core.errors import InvalidValueError, ModelFileError
+from nehmo_core.pairs.build import PairBuild
+from nehmo_core.robots import descriptions, registry
+from nehmo_core.robots.loader import load_robot
+
+ARM = "tiny_arm"
+PAIR = f"{ARM}_{ARM}_any"
+
+
+def _describe(folder: Path, name: str, facts: dict | None) -> None:
+    urdf = descriptions.DATA_DIR / "planar_2link" / "planar_2link.urdf"
+    data: dict = {"name": name, "urdf": str(urdf), "tip": "tip"}
+    if facts is not None:
+        data["facts"] = facts
+    (folder / name).mkdir(parents=True)
+    (folder / name / "robot.yaml").write_text(yaml.safe_dump(data))
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, Path, dict]]:
+    """The planar two-link arm as a user's robot (keypoints along its links), its pair built at
+    the tiny budget into a user model folder."""
+    root = tmp_path_factory.mktemp("pair")
+    robots, models, work = root / "robots", root / "models", root / "work"
+    facts = {
+        "keypoints": ["base_link", "link_1", "link_2", "tip"],
+        "keypoint_segments": [["link_1", "link_2", 2], ["link_2", "tip", 2]],
+    }
+    _describe(robots, ARM, facts)
+    _describe(robots, "no_keypoints_arm", None)
+    mp = pytest.MonkeyPatch()
+    mp.setenv(descriptions.ENV, str(robots))
+    mp.setenv(registry.MODELS_ENV, str(models))
+    load_robot.cache_clear()
+    try:
+        build = PairBuild(ARM, ARM, models=models, work=work, budget="tiny", progress=False)
+        card = json.loads(build.run().read_text())
+        yield models, work, card
+    finally:
+        mp.undo()
+        load_robot.cache_clear()
+
+
+def test_the_pipeline_writes_models_manifest_and_a_card_of_every_stage(built) -> None:
+    models, _, card = built
+    names = {p.name for p in models.iterdir()}
+    assert {
+        f"{PAIR}.pairs.yaml",
+        f"{PAIR}.card.json",
+        f"distance_{PAIR}.safetensors",
+        f"distance_{PAIR}.json",
+        f"value_{PAIR}_bc_sym.safetensors",
+        f"value_{PAIR}_bc_sym.json",
+    } <= names
+    stages = card["stages"]
+    assert list(stages) == [
+        "check", "labels", "distance", "calibrate", "distance-certificate",
+        f"value:{PAIR}", f"certify:{PAIR}", f"falsify:{PAIR}",
+    ]  # fmt: skip
+    assert all(s["wall_time_s"] > 0 for s in stages.values())
+    assert card["total_wall_time_s"] == pytest.approx(sum(card["wall_time_s"].values()))
+    check = stages["check"]["figures"]
+    # two 1 m links reach 1 m (+ their 1 cm radius); the pair can touch up to 2 m apart
+    assert check["robots"][ARM]["reach_m"] == pytest.approx(1.01, abs=0.02)
+    assert check["base_range_m"] == [0.25, 2.05]
+    # capsules in a plane are mirror-symmetric: the mirror map holds, so bc+sym is trained
+    assert check["mirror_check"]["mean_abs_diff_near_m"] < 1e-6
+    assert check["variant"] == "bc+sym"
+    # every command ran is recorded as typed
+    commands = [c for s in stages.values() for c in s["commands"]]
+    assert any(c.startswith(f"nehmo distance generate --pair {PAIR}") for c in commands)
+    assert any(c.startswith(f"nehmo train --system {PAIR} --variant bc+sym") for c in commands)
+    assert any(c.startswith(f"nehmo verify --model {PAIR}") for c in commands)
+    falsified = stages[f"falsify:{PAIR}"]["figures"]
+    assert falsified["states"] == 40 and 0 <= falsified["contacts"] <= 40
+    # the certificate entered the value function's card, the planner's ε reads it
+    value_card = json.loads((models / f"value_{PAIR}_bc_sym.json").read_text())["card"]
+    assert [c["tau"] for c in value_card["certificates"]] == [0.3]
+    assert value_card["pair_card"] == f"{PAIR}.card.json"
+
+
+def test_a_fresh_process_finds_the_pair_through_the_model_folder(built) -> None:
+    models, _, _ = built
+    code = (
+        "import json\n"
+        "from nehmo_core.hjr import load_value_function\n"
+        "from nehmo_core.robots.registry import arm_pair, pair_base_range\n"
+        f"vf = load_value_function({PAIR!r}, variant='bc+sym')\n"
+        f"p = arm_pair({PAIR!r})\n"
+        "print(json.dumps({'dim': vf.system.state_dim, 'range': pair_base_range(p.name),"
+        " 'folder': str(p.folder), 'domain': p.domain}))\n"
+    )
+    env = {
+        **os.environ,
+        descriptions.ENV: str(models.parent / "robots"),
+        registry.MODELS_ENV: str(models),
+    }
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    found = json.loads(out.stdout.strip().splitlines()[-1])
+    assert found == {"dim": 5, "range": [0.25, 2.05], "folder": str(models), "domain": "limits"}
+
+
+def test_a_build_goes_on_where_it_stopped(built, monkeypatch: pytest.MonkeyPatch) -> None:
+    models, work, _ = built
+    monkeypatch.setenv(descriptions.ENV, str(models.parent / "robots"))
+    monkeypatch.setenv(registry.MODELS_ENV, str(models))
+    state = json.loads((work / "state.json").read_text())
+    before = dict(state["stages"])
+    del state["stages"][f"falsify:{PAIR}"], state["stages"]["card"]  # as if stopped there
+    (work / "state.json").write_text(json.dumps(state))
+    build = PairBuild(ARM, ARM, models=models, work=work, budget="tiny", progress=False)
+    build.run()
+    after = json.loads((work / "state.json").read_text())["stages"]
+    for stage in ("check", "labels", "distance", f"value:{PAIR}"):
+        assert after[stage] == before[stage]  # not run again
+    assert (
+        after[f"falsify:{PAIR}"]["figures"]["seed"] == before[f"falsify:{PAIR}"]["figures"]["seed"]
+    )
+    with pytest.raises(InvalidValueError, match="budget = 'tiny'"):
+        PairBuild(ARM, ARM, models=models, work=work, budget="standard", progress=False)
+
+
+def test_bad_input_is_one_clear_error(
+    built, monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    models, _, _ = built
+    monkeypatch.setenv(descriptions.ENV, str(models.parent / "robots"))
+    with pytest.raises(InvalidValueError, match=r"robot 2.*registered robot.*'nope'"):
+        PairBuild(ARM, "nope", models=tmp_path / "m", work=tmp_path / "w")
+    with pytest.raises(InvalidValueError, match="--budget"):
+        PairBuild(ARM, ARM, models=tmp_path / "m", work=tmp_path / "w", budget="huge")
+    load_robot.cache_clear()
+    build = PairBuild(
+        "no_keypoints_arm", "no_keypoints_arm", models=tmp_path / "m", work=tmp_path / "w2",
+        budget="tiny", progress=False,
+    )  # fmt: skip
+    with pytest.raises(ModelFileError, match="no keypoints"):
+        build.run()
+    assert main(["pair", "build", "nope", ARM, "--models", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nehmo pair: error:" in err[0] and "'nope'" in err[0]
+
+
+def test_a_malformed_manifest_names_the_file_and_the_field(tmp_path: Path) -> None:
+    path = tmp_path / f"x{registry.MANIFEST_SUFFIX}"
+    path.write_text("pairs:\n  - {name: a_b_any, robots: [ur5], conditioned: true}\n")
+    with pytest.raises(InvalidValueError, match=r"pairs\[0\]\.robots.*two robot names"):
+        registry.read_pair_manifest(path)
+    path.write_text(
+        "pairs:\n  - {name: a_b_any, robots: [ur5, ur5], conditioned: true, base_range: [2, 1]}\n"
+    )
+    with pytest.raises(InvalidValueError, match=r"base_range.*0 < low < high"):
+        registry.read_pair_manifest(path)
+    path.write_text("pairs:\n  - {name: a_b_any, robots: [ur5, ur5], colour: red}\n")
+    with pytest.raises(InvalidValueError, match="keys among"):
+        registry.read_pair_manifest(path)
