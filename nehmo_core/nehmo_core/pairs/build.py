@@ -553,7 +553,8 @@ class PairBuild:
             "x, _, share = draw_level_set(value, UniformBox(value.system), tau, eps, n, rng)\n"
             "m, who = worst_margins(value, margin, x, VerifySettings(tau=tau), rng, 'falsify')\n"
             "margin.close(); k = int((m <= 0).sum())\n"
-            "print(RESULT, json.dumps({'tau': tau, 'epsilon': eps, 'states': int(len(x)), 'contacts': k,"
+            "print(RESULT, json.dumps({'tau': tau, 'epsilon': eps, 'states': int(len(x)),"
+            " 'contacts': k,"
             " 'rate': k / len(x), 'bound': violation_bound(len(x), k, 1e-3), 'seed': seed,"
             " 'accepted_share': share}))\n"
         )

@@ -178,14 +178,24 @@ def robot_description(name: str) -> RobotDescription:
     return load_description(paths[name])
 
 
-def write_description(folder: Path, name: str, urdf: Path, tip: str, srdf: Path | None) -> Path:
-    """``folder/name/robot.yaml`` for a checked URDF (paths absolute); returns its path."""
+def write_description(
+    folder: Path,
+    name: str,
+    urdf: Path,
+    tip: str,
+    srdf: Path | None,
+    facts: dict[str, Any] | None = None,
+) -> Path:
+    """``folder/name/robot.yaml`` for a checked URDF (paths absolute) and its ``facts``;
+    returns its path."""
     out = folder / name / "robot.yaml"
     if out.exists():
         raise ModelFileError(f"{out} exists already (remove it to describe {name!r} anew)")
     data: dict[str, Any] = {"name": name, "urdf": str(urdf.resolve()), "tip": tip}
     if srdf is not None:
         data["srdf"] = str(srdf.resolve())
+    if facts:
+        data["facts"] = facts
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(yaml.safe_dump(data, sort_keys=False))
     load_description(out)  # what was written reads back

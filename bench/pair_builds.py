@@ -1,0 +1,95 @@
+"""Wall time per stage and the figures of every pair built by ``nehmo pair build``.
+
+Reads the pair cards (``<pair>.card.json``) in the model folders (the shipped ``models/`` and
+``NEHMO_MODELS``) and writes ``bench/results/pair_builds.{json,md}``.
+
+    ./run python bench/pair_builds.py
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from nehmo_core.robots.registry import model_dirs
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _mm(value: float | None) -> str:
+    return "–" if value is None else f"{1000 * value:.1f}"
+
+
+def main() -> int:
+    cards = {
+        path.name.removesuffix(".card.json"): json.loads(path.read_text())
+        for folder in model_dirs()
+        for path in sorted(folder.glob("*.card.json"))
+    }
+    out = ROOT / "bench" / "results" / "pair_builds"
+    out.with_suffix(".json").write_text(json.dumps(cards, indent=2) + "\n")
+    lines = [
+        "# Pair builds: wall time per stage and what each stage measured",
+        "",
+        "From the pair cards that `nehmo pair build` writes beside the models; the command, "
+        "budget, seeds and hardware of each are in its card. `bench/pair_builds.py`.",
+        "",
+    ]
+    for pair, card in cards.items():
+        stages = card["stages"]
+        lines += [
+            f"## {pair}",
+            "",
+            f"`{card['command']}` on {card['hardware']}; total "
+            f"{card['total_wall_time_s'] / 60:.1f} min.",
+            "",
+            "| stage | wall time [min] |",
+            "|---|---|",
+            *(f"| {name} | {s / 60:.1f} |" for name, s in card["wall_time_s"].items()),
+            "",
+        ]
+        check = stages["check"]["figures"]
+        mirror = check["mirror_check"]
+        lines.append(
+            f"- Base distances modelled: {check['base_range_m'][0]}–{check['base_range_m'][1]} m "
+            "(reach "
+            + ", ".join(f"{r}: {v['reach_m']:.3f} m" for r, v in check["robots"].items())
+            + f"). Variant: {check['variant']} ({mirror.get('why', '')})."
+        )
+        held = stages["calibrate"]["figures"]["held_out"]
+        lines.append(
+            f"- Learned distance, held out ({held.get('n')} states): mean error "
+            f"{_mm(held.get('mae_m'))} mm, within 10 cm of contact {_mm(held.get('mae_near_m'))} "
+            f"mm ({held.get('n_near')} states), false-safe rate "
+            f"{100 * held.get('false_safe_rate', float('nan')):.2f} %, offset "
+            f"{_mm(stages['calibrate']['figures'].get('output_offset_m'))} mm."
+        )
+        cert = stages["distance-certificate"]["figures"]
+        lines.append(
+            f"- Distance certificate (uniform contact states, N = {cert['colliding']}, "
+            f"α = {cert['alpha']}, β = {cert['beta']}): certified level "
+            f"{_mm(cert['level_m']) if cert['certified'] else 'none'} mm; "
+            f"{cert['false_safe_at_zero']} contacts read above 0."
+        )
+        for name, stage in stages.items():
+            f = stage["figures"]
+            if name.startswith("certify:"):
+                lines.append(
+                    f"- `{name[8:]}` value certificate at τ = {f['tau']} s (uniform, N = "
+                    f"{f['samples']}): δ = {_mm(f['delta'])} mm, {f['violations']} violations, "
+                    f"ε ≤ {100 * f['epsilon']:.2f} %, certified: {f['certified']}."
+                )
+            if name.startswith("falsify:"):
+                lines.append(
+                    f"- `{name[8:]}` falsification at the planner's margin ε = "
+                    f"{_mm(f['epsilon'])} mm: {f['contacts']} contacts in {f['states']} "
+                    f"rollouts (bound {100 * f['bound']:.2f} % at confidence 0.999)."
+                )
+        lines.append("")
+    out.with_suffix(".md").write_text("\n".join(lines))
+    print(f"wrote {out}.json and .md ({len(cards)} pairs)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
