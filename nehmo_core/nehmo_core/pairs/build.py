@@ -38,77 +38,16 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
 from tqdm import tqdm
 
-from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError
+from nehmo_core.errors import InvalidValueError, NehmoError
+from nehmo_core.pairs.budgets import BUDGETS
+from nehmo_core.pairs.check import judge_mirror, pair_names, robot_figures, write_manifest
+from nehmo_core.pairs.probes import RESULT
 from nehmo_core.robots import registry
 from nehmo_core.robots.descriptions import robot_names
 
-__all__ = ["BUDGETS", "Budget", "PairBuild", "pair_names"]
-
-
-@dataclass(frozen=True)
-class Budget:
-    """How much data and training a build spends (``standard``: the shipped models' scale)."""
-
-    uniform: int
-    boundary: int
-    test: int  # held-out samples (half uniform, half boundary)
-    calibration: int  # calibration samples (half uniform, half boundary)
-    hidden: str
-    epochs: int
-    value_samples: str
-    value_preset: str
-    certificate_samples: int
-    alpha: float  # the certificates' target violation probability (β = 1e-3)
-    search_samples: int
-    falsify_samples: int
-    mirror_samples: int
-    reach_samples: int
-
-
-BUDGETS: dict[str, Budget] = {
-    "standard": Budget(
-        uniform=400_000,
-        boundary=800_000,
-        test=60_000,
-        calibration=80_000,
-        hidden="256,256,256",
-        epochs=40,
-        value_samples="20M",
-        value_preset="cpu_12d",
-        certificate_samples=3000,
-        alpha=0.01,
-        search_samples=500,
-        falsify_samples=3000,
-        mirror_samples=2000,
-        reach_samples=4000,
-    ),
-    # The pipeline end to end in minutes (tests, trying a robot): models too small to plan with.
-    "tiny": Budget(
-        uniform=3000,
-        boundary=3000,
-        test=1000,
-        calibration=2000,
-        hidden="32,32",
-        epochs=1,
-        value_samples="20k",
-        value_preset="cpu",
-        certificate_samples=60,
-        alpha=0.2,
-        search_samples=30,
-        falsify_samples=40,
-        mirror_samples=100,
-        reach_samples=200,
-    ),
-}
-
-
-def pair_names(robot_1: str, robot_2: str) -> tuple[str, ...]:
-    """The pair (and, for two robots, the swapped game) a build makes: ``A_B_any`` first."""
-    first = f"{robot_1}_{robot_2}_any"
-    return (first,) if robot_1 == robot_2 else (first, f"{robot_2}_{robot_1}_any")
+__all__ = ["PairBuild", "pair_names"]
 
 
 def default_models_dir() -> Path:
@@ -138,6 +77,7 @@ class PairBuild:
         seed: int = 0,
         threads: int = 2,
         progress: bool = True,
+        device: str = "cpu",
     ) -> None:
         known = robot_names()
         for i, robot in enumerate((robot_1, robot_2), start=1):
@@ -159,6 +99,7 @@ class PairBuild:
         self.seed = seed
         self.threads = threads
         self.progress = progress
+        self.device = device
         self.state_path = self.work / "state.json"
         self.state: dict[str, Any] = self._read_state()
 
@@ -268,12 +209,13 @@ class PairBuild:
             )
         return command
 
-    def _python(self, what: str, code: str) -> Any:
-        """Run ``code`` in a fresh process (the pair registered through the model folder) and
-        return the JSON it printed after :data:`RESULT` (PyBullet prints to stdout too)."""
-        code = f"RESULT = {RESULT!r}\n" + code
+    def _python(self, what: str, args: list[str]) -> Any:
+        """Run a probe (:mod:`.probes`) in a fresh process and return its JSON result."""
         proc = subprocess.run(
-            [sys.executable, "-c", code], env=self._env(), capture_output=True, text=True
+            [sys.executable, "-m", "nehmo_core.pairs.probes", *args],
+            env=self._env(),
+            capture_output=True,
+            text=True,
         )
         at = proc.stdout.rfind(RESULT)
         if proc.returncode != 0 or at < 0:
@@ -283,43 +225,26 @@ class PairBuild:
     # -- stages ------------------------------------------------------------------------------------
 
     def _check(self) -> StageRecord:
-        from nehmo_core.geometry.symmetry import find_mirror_map
-        from nehmo_core.pairs.reach import base_range, horizontal_reach
-        from nehmo_core.planning.models.pair_frame import base_yaw_joint
-        from nehmo_core.robots.loader import load_robot
+        from nehmo_core.pairs.reach import base_range
 
-        figures: dict[str, Any] = {"robots": {}}
-        reaches = []
-        for name in dict.fromkeys(self.robots):
-            robot = load_robot(name)
-            if not robot.facts.keypoints:
-                raise ModelFileError(
-                    f"robot {name!r} has no keypoints (facts.keypoints in its robot.yaml): the "
-                    "learned distance is built on them; list the link frames along the arm"
-                )
-            if base_yaw_joint(robot) is None:
-                raise ModelFileError(
-                    f"robot {name!r}: its first joint does not turn the arm about the base's "
-                    "vertical axis, so one model cannot serve every layout"
-                )
-            try:
-                mirror = find_mirror_map(robot)
-                found: dict[str, Any] = {"sign": list(mirror.sign), "offset": list(mirror.offset)}
-            except NehmoError as exc:
-                found = {"none": str(exc)}
-            reach = horizontal_reach(robot, self.budget.reach_samples, self.seed)
-            figures["robots"][name] = {"dof": robot.dof, "mirror_map": found, "reach_m": reach}
-        for name in self.robots:
-            reaches.append(figures["robots"][name]["reach_m"])
-        low, high = base_range(*reaches)
+        figures: dict[str, Any] = {
+            "robots": {
+                n: robot_figures(n, self.budget.reach_samples, self.seed) for n in self.robots
+            }
+        }
+        low, high = base_range(*(figures["robots"][n]["reach_m"] for n in self.robots))
         figures["base_range_m"] = [low, high]
-        self._write_manifest((low, high), "bc+sym")
+        write_manifest(self.models, self.robots, (low, high), "bc+sym")
         if any("none" in figures["robots"][n]["mirror_map"] for n in self.robots):
             figures["mirror_check"] = {"variant": "bc", "why": "a robot has no mirror map"}
         else:
-            figures["mirror_check"] = self._mirror_check()
+            n, seed = str(self.budget.mirror_samples), str(self.seed)
+            args = ["mirror", self.pair, "--samples", n, "--seed", seed]
+            figures["mirror_check"] = judge_mirror(
+                self._python(f"mirror check of {self.pair}", args)
+            )
         figures["variant"] = figures["mirror_check"]["variant"]
-        self._write_manifest((low, high), figures["variant"])
+        write_manifest(self.models, self.robots, (low, high), figures["variant"])
         return StageRecord("check", 0.0, [], figures)
 
     @property
@@ -330,63 +255,6 @@ class PairBuild:
     @property
     def slug(self) -> str:
         return self.variant.replace("+", "_")
-
-    def _write_manifest(self, base_range: tuple[float, float], variant: str) -> None:
-        entries: list[dict[str, Any]] = [
-            {
-                "name": self.pair,
-                "robots": list(self.robots),
-                "conditioned": True,
-                "base_range": [float(base_range[0]), float(base_range[1])],
-                "values": [variant],
-            }
-        ]
-        if len(self.names) == 2:
-            entries.append(
-                {
-                    "name": self.names[1],
-                    "robots": [self.robots[1], self.robots[0]],
-                    "swapped": self.pair,
-                    "values": [variant],
-                }
-            )
-        path = self.models / f"{self.pair}{registry.MANIFEST_SUFFIX}"
-        header = (
-            f"# Written by nehmo pair build {self.robots[0]} {self.robots[1]}: the pair's models "
-            "are the files beside it.\n"
-        )
-        path.write_text(header + yaml.safe_dump({"pairs": entries}, sort_keys=False))
-
-    def _mirror_check(self) -> dict[str, Any]:
-        """The pair distance of random states and of their mirror images, on exact geometry."""
-        code = (
-            "import json, sys, numpy as np\n"
-            "from nehmo_core.geometry import distance_data as dd\n"
-            "from nehmo_core.hjr.systems.arm_pairs import pair_symmetry\n"
-            f"pair, n, seed = {self.pair!r}, {self.budget.mirror_samples}, {self.seed}\n"
-            "rng = np.random.default_rng(seed)\n"
-            "q = dd.uniform_samples(pair, n, rng)\n"
-            "f = pair_symmetry(pair)\n"
-            "m = q.copy(); m[:, : len(f.sign)] = f.apply(q[:, : len(f.sign)])\n"
-            "yaw = rng.uniform(-np.pi, np.pi, size=(n, 2))\n"
-            "d = dd.exact_distances(pair, np.c_[q, yaw])\n"
-            "dm = dd.exact_distances(pair, np.c_[m, -yaw])\n"
-            "near = np.abs(d) < 0.3\n"
-            "diff = np.abs(d - dm)[near]\n"
-            "print(RESULT, json.dumps({'states': n, 'near_contact_states': int(near.sum()),"
-            " 'mean_abs_diff_near_m': float(diff.mean()) if diff.size else 0.0,"
-            " 'max_abs_diff_near_m': float(diff.max()) if diff.size else 0.0}))\n"
-        )
-        result = self._python(f"mirror check of {self.pair}", code)
-        symmetric = result["mean_abs_diff_near_m"] <= MIRROR_TOLERANCE
-        result["variant"] = "bc+sym" if symmetric else "bc"
-        result["why"] = (
-            f"mean |d(x) - d(f(x))| within 0.3 m of contact "
-            f"{1000 * result['mean_abs_diff_near_m']:.1f} mm "
-            f"{'<=' if symmetric else '>'} {1000 * MIRROR_TOLERANCE:.0f} mm: "
-            + ("the mirror map holds; bc+sym" if symmetric else "no exact mirror map; bc")
-        )
-        return result
 
     def _labels(self) -> StageRecord:
         b = self.budget
@@ -407,18 +275,8 @@ class PairBuild:
                 self._nehmo(
                     "labels",
                     [
-                        "distance",
-                        "generate",
-                        "--pair",
-                        self.pair,
-                        "--uniform",
-                        str(uniform),
-                        "--boundary",
-                        str(boundary),
-                        "--seed",
-                        str(seed),
-                        "--workers",
-                        str(self.threads),
+                        *f"distance generate --pair {self.pair} --uniform {uniform} "
+                        f"--boundary {boundary} --seed {seed} --workers {self.threads}".split(),
                         "--out",
                         str(tmp),
                     ],
@@ -463,22 +321,12 @@ class PairBuild:
         }
 
     def _distance_certificate(self) -> StageRecord:
-        code = (
-            "import json, numpy as np\n"
-            "from nehmo_core.geometry.distance_model import load_distance_model\n"
-            "from nehmo_core.hjr.systems import make_system\n"
-            "from nehmo_core.verify.distance import certify_distance\n"
-            "from nehmo_core.verify.distributions import UniformBox\n"
-            "from nehmo_core.verify.truth import exact_margin\n"
-            f"pair, n = {self.pair!r}, {self.budget.certificate_samples}\n"
-            f"seed = {self.seed + 3003}\n"
-            "system = make_system(pair); margin = exact_margin(system)\n"
-            "cert = certify_distance(load_distance_model(pair), margin, UniformBox(system),"
-            f" np.random.default_rng(seed), samples=n, alpha={self.budget.alpha})\n"
-            "margin.close()\n"
-            "print(RESULT, json.dumps({**cert.to_dict(), 'seed': seed}))\n"
-        )
-        cert = self._python("distance certificate", code)
+        args = [
+            "distance-certificate", self.pair,
+            "--samples", str(self.budget.certificate_samples),
+            "--seed", str(self.seed + 3003), "--alpha", str(self.budget.alpha),
+        ]  # fmt: skip
+        cert = self._python("distance certificate", args)
         card_path = self._distance_card()
         card = json.loads(card_path.read_text())
         card["certificates"] = [{**cert, "command": "nehmo pair build (distance-certificate)"}]
@@ -491,7 +339,7 @@ class PairBuild:
             "train", "--system", game, "--variant", self.variant,
             "--preset", self.budget.value_preset,
             "--samples", self.budget.value_samples, "--seed", str(self.seed),
-            "--threads", str(self.threads), "--out", str(run),
+            "--threads", str(self.threads), "--device", self.device, "--out", str(run),
         ]  # fmt: skip
         if (run / "checkpoint.safetensors").exists() and not (run / "model.safetensors").exists():
             args.append("--resume")
@@ -536,29 +384,11 @@ class PairBuild:
         )
 
     def _falsify(self, game: str) -> StageRecord:
-        code = (
-            "import json, numpy as np\n"
-            "from nehmo_core.hjr import load_value_function\n"
-            "from nehmo_core.planning.settings import PlannerSettings\n"
-            "from nehmo_core.verify.bound import violation_bound\n"
-            "from nehmo_core.verify.certify import VerifySettings, worst_margins\n"
-            "from nehmo_core.verify.distributions import UniformBox, draw_level_set\n"
-            "from nehmo_core.verify.truth import exact_margin\n"
-            f"game, n, seed = {game!r}, {self.budget.falsify_samples}, {self.seed + 4004}\n"
-            "opt = PlannerSettings().opt; tau = opt.t_safe\n"
-            f"value = load_value_function(game, variant={self.variant!r})\n"
-            "certs = value.card.get('certificates', ())\n"
-            "eps = max([opt.epsilon, *(c['delta'] for c in certs if abs(c['tau'] - tau) < 1e-6)])\n"
-            "rng = np.random.default_rng(seed); margin = exact_margin(value.system)\n"
-            "x, _, share = draw_level_set(value, UniformBox(value.system), tau, eps, n, rng)\n"
-            "m, who = worst_margins(value, margin, x, VerifySettings(tau=tau), rng, 'falsify')\n"
-            "margin.close(); k = int((m <= 0).sum())\n"
-            "print(RESULT, json.dumps({'tau': tau, 'epsilon': eps, 'states': int(len(x)),"
-            " 'contacts': k,"
-            " 'rate': k / len(x), 'bound': violation_bound(len(x), k, 1e-3), 'seed': seed,"
-            " 'accepted_share': share}))\n"
-        )
-        result = self._python(f"falsification of {game}", code)
+        args = [
+            "falsify", game, "--variant", self.variant,
+            "--samples", str(self.budget.falsify_samples), "--seed", str(self.seed + 4004),
+        ]  # fmt: skip
+        result = self._python(f"falsification of {game}", args)
         return StageRecord(f"falsify:{game}", 0.0, [], result)
 
     def _card(self) -> StageRecord:
@@ -585,20 +415,5 @@ class PairBuild:
         return StageRecord("card", 0.0, [], {"card": str(path)})
 
 
-RESULT = "NEHMO-RESULT "
-MIRROR_TOLERANCE = 0.002
-"""[m] Largest mean change of the exact pair distance under the mirror maps, within 0.3 m of
-contact, for which a build trains ``bc+sym`` (the UR5's meshes: 0.7 mm); above it, ``bc``."""
 CALIBRATION_TARGET = 0.009
 """False-safe rate the learned distance's offset is calibrated to (the shipped models')."""
-
-
-def describe(state: dict[str, Any]) -> str:
-    """A few lines on a build's progress (``nehmo pair status``)."""
-    lines = [
-        f"pair {state['pair']} ({state['budget']}, seed {state['seed']}): "
-        f"models in {state['models']}"
-    ]
-    for name, rec in state["stages"].items():
-        lines.append(f"  {name}: {rec['wall_time_s']:.0f} s")
-    return "\n".join(lines)

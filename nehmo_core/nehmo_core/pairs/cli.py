@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Any
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.pairs.build import BUDGETS, PairBuild, default_models_dir, describe, pair_names
+from nehmo_core.pairs.budgets import BUDGETS
+from nehmo_core.pairs.build import PairBuild, default_models_dir, pair_names
 
 __all__ = ["add_arguments", "run"]
 
@@ -34,6 +36,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     b.add_argument("--budget", default="standard", help=f"one of {sorted(BUDGETS)}")
     b.add_argument("--seed", type=int, default=0)
     b.add_argument("--threads", type=int, default=2, help="CPU threads / label workers")
+    b.add_argument(
+        "--device",
+        default="auto",
+        choices=("cpu", "cuda", "auto"),
+        help="where value functions train (auto: a CUDA GPU when present, else the CPU)",
+    )
     b.add_argument("--no-progress", action="store_true", help="no progress bars")
     s = sub.add_parser("status", help="what a build has done, stage by stage")
     s.add_argument("work", type=Path, help="the build's work folder")
@@ -56,7 +64,19 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         threads=args.threads,
         progress=not args.no_progress,
+        device=args.device,
     )
     card = build.run()
     print(f"{pair}: models and card in {build.models} ({card.name})")
     return 0
+
+
+def describe(state: dict[str, Any]) -> str:
+    """A few lines on a build's progress (``nehmo pair status``)."""
+    lines = [
+        f"pair {state['pair']} ({state['budget']}, seed {state['seed']}): "
+        f"models in {state['models']}"
+    ]
+    for name, rec in state["stages"].items():
+        lines.append(f"  {name}: {rec['wall_time_s']:.0f} s")
+    return "\n".join(lines)

@@ -1,0 +1,132 @@
+"""The measurements of ``nehmo pair build`` that are not a ``nehmo`` command of their own.
+
+Each runs in a fresh process (``python -m nehmo_core.pairs.probes KIND ...``), where the pair
+being built is registered through its model folder, and prints its result as one JSON line
+after :data:`RESULT` (PyBullet writes to stdout as well).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+__all__ = ["RESULT", "distance_certificate", "falsify", "mirror_check"]
+
+RESULT = "NEHMO-RESULT "
+NEAR = 0.3
+"""[m] States this close to contact enter the mirror check's mean."""
+
+
+def mirror_check(pair: str, samples: int, seed: int) -> dict[str, Any]:
+    """The exact pair distance of random states and of their mirror images: the mirror y → −y
+    turns both base yaws to their negatives and maps the joints by the robots' mirror maps."""
+    from nehmo_core.geometry import distance_data as dd
+    from nehmo_core.hjr.systems.arm_pairs import pair_symmetry
+
+    rng = np.random.default_rng(seed)
+    q = dd.uniform_samples(pair, samples, rng)
+    f = pair_symmetry(pair)
+    mirrored = q.copy()
+    mirrored[:, : len(f.sign)] = f.apply(q[:, : len(f.sign)])
+    yaw = rng.uniform(-np.pi, np.pi, size=(samples, 2))
+    d = dd.exact_distances(pair, np.c_[q, yaw])
+    d_mirrored = dd.exact_distances(pair, np.c_[mirrored, -yaw])
+    near = np.abs(d) < NEAR
+    diff = np.abs(d - d_mirrored)[near]
+    return {
+        "states": samples,
+        "near_contact_states": int(near.sum()),
+        "mean_abs_diff_near_m": float(diff.mean()) if diff.size else 0.0,
+        "max_abs_diff_near_m": float(diff.max()) if diff.size else 0.0,
+        "seed": seed,
+    }
+
+
+def distance_certificate(pair: str, samples: int, seed: int, alpha: float) -> dict[str, Any]:
+    """:func:`~nehmo_core.verify.distance.certify_distance` over uniform exact contact states."""
+    from nehmo_core.geometry.distance_model import load_distance_model
+    from nehmo_core.hjr.systems import make_system
+    from nehmo_core.verify.distance import certify_distance
+    from nehmo_core.verify.distributions import UniformBox
+    from nehmo_core.verify.truth import exact_margin
+
+    system = make_system(pair)
+    margin = exact_margin(system)
+    try:
+        cert = certify_distance(
+            load_distance_model(pair),
+            margin,
+            UniformBox(system),
+            np.random.default_rng(seed),
+            samples=samples,
+            alpha=alpha,
+        )
+    finally:
+        margin.close()
+    return {**cert.to_dict(), "seed": seed}
+
+
+def falsify(game: str, variant: str, samples: int, seed: int) -> dict[str, Any]:
+    """States the planner would call safe, ``V(t_safe) ≥ ε`` with ε = max(the planner's floor,
+    the model's δ certified at t_safe), rolled out against every adversary on exact geometry."""
+    from nehmo_core.hjr import load_value_function
+    from nehmo_core.planning.settings import PlannerSettings
+    from nehmo_core.verify.bound import violation_bound
+    from nehmo_core.verify.certify import VerifySettings, worst_margins
+    from nehmo_core.verify.distributions import UniformBox, draw_level_set
+    from nehmo_core.verify.truth import exact_margin
+
+    opt = PlannerSettings().opt
+    tau = opt.t_safe
+    value = load_value_function(game, variant=variant)
+    certs = value.card.get("certificates", ())
+    eps = max([opt.epsilon, *(c["delta"] for c in certs if abs(c["tau"] - tau) < 1e-6)])
+    rng = np.random.default_rng(seed)
+    margin = exact_margin(value.system)
+    try:
+        x, _, share = draw_level_set(value, UniformBox(value.system), tau, eps, samples, rng)
+        m, _ = worst_margins(value, margin, x, VerifySettings(tau=tau), rng, "falsify")
+    finally:
+        margin.close()
+    k = int((m <= 0).sum())
+    return {
+        "tau": tau,
+        "epsilon": eps,
+        "states": len(x),
+        "contacts": k,
+        "rate": k / len(x),
+        "bound": violation_bound(len(x), k, 1e-3),
+        "seed": seed,
+        "accepted_share": share,
+    }
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m nehmo_core.pairs.probes")
+    sub = parser.add_subparsers(dest="kind", required=True)
+    m = sub.add_parser("mirror", help="the pair distance under the mirror maps")
+    d = sub.add_parser("distance-certificate", help="certify the learned distance")
+    f = sub.add_parser("falsify", help="the game at the planner's margin")
+    for p in (m, d, f):
+        p.add_argument("pair")
+        p.add_argument("--samples", type=int, required=True)
+        p.add_argument("--seed", type=int, required=True)
+    d.add_argument("--alpha", type=float, required=True)
+    f.add_argument("--variant", required=True)
+    args = parser.parse_args(argv)
+    if args.kind == "mirror":
+        result = mirror_check(args.pair, args.samples, args.seed)
+    elif args.kind == "distance-certificate":
+        result = distance_certificate(args.pair, args.samples, args.seed, args.alpha)
+    else:
+        result = falsify(args.pair, args.variant, args.samples, args.seed)
+    print("\n" + RESULT + json.dumps(result), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
