@@ -8,9 +8,11 @@ import pytest
 
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.planners import build_planners
+from nehmo_core.hjr import load_value_function
 from nehmo_core.planning.models.registry import ModelRegistry
+from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.robots import load_cell, registry
+from nehmo_core.robots import load_cell, load_robot, registry
 from nehmo_core.sim.scenarios import generate_scenario_set
 
 SEED = 7  # scenarios of this test only (evaluation seeds: docs/adding-a-robot.md)
@@ -31,6 +33,28 @@ def test_the_panda_pairs_ship() -> None:
     assert registry.arm_pair("panda_panda_any").domain == "limits"
     low, high = registry.pair_base_range("panda_panda_any")
     assert low <= 0.3 and high >= 1.95  # two Pandas touch up to 2 x 0.96 m apart
+
+
+def test_limited_joints_span_their_limits_and_the_base_yaw_wraps() -> None:
+    """The Panda's joints are limited: its models span each joint's limits widened by 0.3 rad,
+    except joint 1, which also turns with the layout (the pair frame shifts it) and wraps; the
+    compiled model wraps it as the torch model does."""
+    vf = load_value_function("panda_panda_any", variant="bc")
+    system, robot = vf.system, load_robot("panda")
+    periodic = np.array(system.periodic[:14])
+    assert periodic[[0, 7]].all() and not periodic[[1, 2, 3, 4, 5, 6, 8, 13]].any()
+    np.testing.assert_allclose(system.lower[1:7], robot.lower[1:] - 0.3)
+    np.testing.assert_allclose(system.upper[1:7], robot.upper[1:] + 0.3)
+    assert system.upper[5] > np.pi  # joint 6 reaches 3.75 rad
+    model = PairValueModel.from_value_function(vf, "panda_test", backend="vm")
+    rng = np.random.default_rng(0)
+    x = rng.uniform(system.lower, system.upper, size=(6, system.state_dim))
+    turned = x.copy()
+    turned[:, 0] += 2 * np.pi
+    turned[:, 7] -= 2 * np.pi
+    v, _ = model.evaluate(0.3, x)
+    np.testing.assert_allclose(model.evaluate(0.3, turned)[0], v, atol=1e-9)
+    np.testing.assert_allclose(vf.value(np.full(6, 0.3), x), v, atol=1e-5)
 
 
 @pytest.mark.parametrize("cell_name", _cells())

@@ -10,6 +10,7 @@ from typing import Any
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.pairs.budgets import BUDGETS
 from nehmo_core.pairs.build import PairBuild, default_models_dir, pair_names
+from nehmo_core.robots import registry
 
 __all__ = ["add_arguments", "run"]
 
@@ -68,6 +69,8 @@ def run(args: argparse.Namespace) -> int:
     )
     card = build.run()
     print(f"{pair}: models and card in {build.models} ({card.name})")
+    if str(build.models) not in registry.model_dirs_env():
+        print(f"plan with them: export {registry.MODELS_ENV}={build.models}")
     return 0
 
 

@@ -38,6 +38,7 @@ __all__ = [
     "ArmPair",
     "distance_pairs",
     "model_dirs",
+    "model_dirs_env",
     "model_file",
     "pair_base_range",
     "pairs_by_robots",
@@ -164,10 +165,15 @@ MANIFEST_SUFFIX = ".pairs.yaml"
 _MANIFEST_KEYS = {"name", "robots", "conditioned", "swapped", "base_range", "values"}
 
 
+def model_dirs_env() -> tuple[str, ...]:
+    """The folders named in ``NEHMO_MODELS``, resolved."""
+    found = [p for p in os.environ.get(MODELS_ENV, "").split(os.pathsep) if p]
+    return tuple(str(Path(p).resolve()) for p in found)
+
+
 def model_dirs() -> tuple[Path, ...]:
     """The model folders: the shipped ``models/``, then those named in ``NEHMO_MODELS``."""
-    extra = [Path(p) for p in os.environ.get(MODELS_ENV, "").split(os.pathsep) if p]
-    return tuple(dict.fromkeys([MODELS_DIR, *extra]))
+    return tuple(dict.fromkeys([MODELS_DIR, *(Path(p) for p in model_dirs_env())]))
 
 
 def read_pair_manifest(path: Path) -> tuple[ArmPair, ...]:
