@@ -357,7 +357,15 @@ class PairBuild:
         )
         shutil.copyfile(run / "model.safetensors", target.with_suffix(".safetensors"))
         target.with_suffix(".json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
-        figures = {"samples": meta.get("samples"), "train_wall_time_s": meta.get("wall_seconds")}
+        check = self._python(
+            f"value check of {game}",
+            ["value-check", game, "--variant", self.variant, "--samples", "4000", "--seed", "3"],
+        )
+        figures = {
+            "samples": meta.get("samples"),
+            "train_wall_time_s": meta.get("wall_seconds"),
+            "below_boundary": check,
+        }
         return StageRecord(f"value:{game}", 0.0, [command], figures)
 
     def _certify(self, game: str) -> StageRecord:
