@@ -182,6 +182,12 @@ def value_and_gradient_expression(
         l_hat = (boundary - system.value_mean) * system.value_scale
         if network.variant == "exact":
             w, grad_w = l_hat + tau * nn_out, boundary_grad * system.value_scale + tau * nn_grad_x
+        elif network.cap_residual:  # l̂ + min(residual, 0), as the torch network
+            below = nn_out < 0
+            w = l_hat + ca.fmin(nn_out, 0)
+            grad_w = boundary_grad * system.value_scale + ca.if_else(
+                below, nn_grad_x, 0 * nn_grad_x
+            )
         else:
             w, grad_w = l_hat + nn_out, boundary_grad * system.value_scale + nn_grad_x
     value = w / system.value_scale + system.value_mean

@@ -208,6 +208,7 @@ def load_value_function(
         network.load_state_dict(tensors)
     except RuntimeError as exc:
         raise ModelFileError(f"weights in {path} do not fit the network: {exc}") from exc
+    network.cap_residual = bool(meta.get("card", {}).get("cap_residual", False))
     value_function = ValueFunction(network)
     value_function.card = dict(meta.get("card", {}))
     return value_function

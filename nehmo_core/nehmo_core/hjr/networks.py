@@ -140,6 +140,11 @@ class ValueNetwork(nn.Module):
         self.variant = check_variant(variant)
         self.settings = settings or NetworkSettings()
         self.siren = Siren(system.state_dim + 1, self.settings, generator)
+        # Evaluate ``bc``/``bc+sym`` as ``l̂ + min(W − l̂, 0)``: an avoid value function never
+        # exceeds its boundary, so capping the residual at 0 only brings a network that
+        # overshoots l closer to the true V. Set on loading for models whose card asks for it
+        # (the pairs of ``nehmo pair build``); never during training.
+        self.cap_residual = False
         lower = torch.as_tensor(system.lower, dtype=torch.float32)
         upper = torch.as_tensor(system.upper, dtype=torch.float32)
         self.register_buffer("_center", (upper + lower) / 2, persistent=False)
@@ -173,6 +178,8 @@ class ValueNetwork(nn.Module):
         if self.variant == "exact":
             residual = tau * nn_out
             return self.boundary_normalized(x) + residual, residual
+        if self.cap_residual:
+            return self.boundary_normalized(x) + torch.clamp(nn_out, max=0.0), nn_out
         return self.boundary_normalized(x) + nn_out, nn_out  # bc, bc+sym
 
 

@@ -353,6 +353,8 @@ class PairBuild:
                 "boundary": f"l(x) = learned distance distance_{self.pair} (frozen)",
                 "hardware": f"{self.threads} CPU threads ({platform.machine()})",
                 "pair_card": f"{self.pair}.card.json",
+                "cap_residual": True,
+                "evaluation": "V = l + min(W - l, 0): an avoid value never exceeds its boundary",
             }
         )
         shutil.copyfile(run / "model.safetensors", target.with_suffix(".safetensors"))
