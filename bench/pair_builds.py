@@ -8,6 +8,7 @@ Reads the pair cards (``<pair>.card.json``) in the model folders (the shipped ``
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -21,6 +22,12 @@ def _mm(value: float | None) -> str:
 
 
 def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--note", action="append", default=[], metavar="PAIR=TEXT", help="a remark on a build"
+    )
+    args = parser.parse_args()
+    notes = dict(n.split("=", 1) for n in args.note)
     cards = {
         path.name.removesuffix(".card.json"): json.loads(path.read_text())
         for folder in model_dirs()
@@ -73,6 +80,15 @@ def main() -> int:
         )
         for name, stage in stages.items():
             f = stage["figures"]
+            if name.startswith("value:") and "below_boundary" in f:
+                b = f["below_boundary"]
+                lines.append(
+                    f"- `{name[6:]}` value function ({f['samples'] / 1e6:.0f}M samples): the "
+                    f"network's V(T) exceeds l by more than 1 cm at "
+                    f"{100 * b['share_above_boundary_1cm']:.1f} % of {b['states']} uniform "
+                    f"states (p99 excess {_mm(b['p99_excess_m'])} mm); the planner evaluates "
+                    "it capped at l."
+                )
             if name.startswith("certify:"):
                 lines.append(
                     f"- `{name[8:]}` value certificate at τ = {f['tau']} s (uniform, N = "
@@ -85,6 +101,8 @@ def main() -> int:
                     f"{_mm(f['epsilon'])} mm: {f['contacts']} contacts in {f['states']} "
                     f"rollouts (bound {100 * f['bound']:.2f} % at confidence 0.999)."
                 )
+        if pair in notes:
+            lines.append(f"- Note: {notes[pair]}")
         lines.append("")
     out.with_suffix(".md").write_text("\n".join(lines))
     print(f"wrote {out}.json and .md ({len(cards)} pairs)")

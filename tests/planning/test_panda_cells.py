@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.planners import build_planners
@@ -55,6 +56,28 @@ def test_limited_joints_span_their_limits_and_the_base_yaw_wraps() -> None:
     v, _ = model.evaluate(0.3, x)
     np.testing.assert_allclose(model.evaluate(0.3, turned)[0], v, atol=1e-9)
     np.testing.assert_allclose(vf.value(np.full(6, 0.3), x), v, atol=1e-5)
+
+
+def test_the_built_value_function_is_capped_at_its_boundary() -> None:
+    """The card asks for the residual cap: V = l + min(W − l, 0) never exceeds l, in torch and in
+    the compiled model; without the cap this network exceeds l by more than 1 cm at some states
+    (what the card's value check records)."""
+    vf = load_value_function("panda_panda_any", variant="bc")
+    assert vf.card["cap_residual"] and vf.network.cap_residual
+    system = vf.system
+    rng = np.random.default_rng(1)
+    x = rng.uniform(system.lower, system.upper, size=(400, system.state_dim))
+    tau = np.full(len(x), system.horizon)
+    with torch.no_grad():
+        lx = system.boundary(torch.as_tensor(x, dtype=torch.float32)).numpy()
+    assert np.all(vf.value(tau, x) <= lx + 1e-4)
+    model = PairValueModel.from_value_function(vf, "panda_capped", backend="vm")
+    v, g = model.evaluate(system.horizon, x[:20])
+    v_t, g_t = vf.value_and_gradient(tau[:20], x[:20])
+    np.testing.assert_allclose(v, v_t, atol=1e-5)
+    np.testing.assert_allclose(g, g_t, atol=1e-4)
+    vf.network.cap_residual = False
+    assert np.mean(vf.value(tau, x) > lx + 0.01) > 0.0
 
 
 @pytest.mark.parametrize("cell_name", _cells())
