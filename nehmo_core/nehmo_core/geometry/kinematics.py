@@ -46,12 +46,12 @@ def _quiet_urdf_parser() -> Iterator[None]:
     """pytorch-kinematics' URDF parser writes a line per attribute it does not model (e.g. the
     Panda's ``dynamics`` friction terms): none of them matters for kinematics; drop them."""
     core = importlib.import_module("pytorch_kinematics.urdf_parser_py.xml_reflection.core")
-    before = core.on_error
-    core.on_error = lambda message: None
+    before = getattr(core, "on_error")  # noqa: B009 (the module is untyped)
+    setattr(core, "on_error", lambda message: None)  # noqa: B010
     try:
         yield
     finally:
-        core.on_error = before
+        setattr(core, "on_error", before)  # noqa: B010
 
 
 class ArmKinematics:

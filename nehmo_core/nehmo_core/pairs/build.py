@@ -25,6 +25,7 @@ The model folder is where the pair's files go (``--models``, default the first f
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import platform
@@ -147,10 +148,10 @@ class PairBuild:
             ("distance-certificate", self._distance_certificate),
         ]
         for game in self.names:
-            out.append((f"value:{game}", lambda g=game: self._value(g)))
+            out.append((f"value:{game}", functools.partial(self._value, game)))
         for game in self.names:
-            out.append((f"certify:{game}", lambda g=game: self._certify(g)))
-            out.append((f"falsify:{game}", lambda g=game: self._falsify(g)))
+            out.append((f"certify:{game}", functools.partial(self._certify, game)))
+            out.append((f"falsify:{game}", functools.partial(self._falsify, game)))
         out.append(("card", self._card))
         return out
 
