@@ -53,16 +53,17 @@ __all__ = ["PairBuild", "pair_names"]
 
 def default_models_dir() -> Path:
     """The first folder of ``NEHMO_MODELS``, else ``./nehmo_models``."""
-    dirs = [p for p in os.environ.get(registry.MODELS_ENV, "").split(os.pathsep) if p]
+    dirs = registry.model_dirs_env()
     return Path(dirs[0]) if dirs else Path("nehmo_models")
 
 
 @dataclass
 class StageRecord:
-    name: str
-    wall_time_s: float
+    """What a stage ran and measured; its wall time is set by :meth:`PairBuild.run`."""
+
     commands: list[str]
     figures: dict[str, Any]
+    wall_time_s: float = 0.0
 
 
 class PairBuild:
@@ -176,12 +177,8 @@ class PairBuild:
 
     def _env(self) -> dict[str, str]:
         env = dict(os.environ)
-        dirs = [str(self.models)] + [
-            p
-            for p in env.get(registry.MODELS_ENV, "").split(os.pathsep)
-            if p and Path(p).resolve() != self.models
-        ]
-        env[registry.MODELS_ENV] = os.pathsep.join(dirs)
+        others = [p for p in registry.model_dirs_env() if p != str(self.models)]
+        env[registry.MODELS_ENV] = os.pathsep.join([str(self.models), *others])
         env["OMP_NUM_THREADS"] = str(self.threads)
         return env
 
@@ -246,7 +243,7 @@ class PairBuild:
             )
         figures["variant"] = figures["mirror_check"]["variant"]
         write_manifest(self.models, self.robots, (low, high), figures["variant"])
-        return StageRecord("check", 0.0, [], figures)
+        return StageRecord([], figures)
 
     @property
     def variant(self) -> str:
@@ -284,7 +281,7 @@ class PairBuild:
                 )
             )
             tmp.replace(out)
-        return StageRecord("labels", 0.0, commands, {k: v[:2] for k, v in sets.items()})
+        return StageRecord(commands, {k: v[:2] for k, v in sets.items()})
 
     def _distance(self) -> StageRecord:
         data = self.work / "data"
@@ -296,7 +293,7 @@ class PairBuild:
                 "--epochs", str(self.budget.epochs), "--seed", str(self.seed),
             ],
         )  # fmt: skip
-        return StageRecord("distance", 0.0, [command], self._distance_figures())
+        return StageRecord([command], self._distance_figures())
 
     def _calibrate(self) -> StageRecord:
         data = self.work / "data"
@@ -307,7 +304,7 @@ class PairBuild:
                 "--test", str(data / "test.npz"), "--target", str(CALIBRATION_TARGET),
             ],
         )  # fmt: skip
-        return StageRecord("calibrate", 0.0, [command], self._distance_figures())
+        return StageRecord([command], self._distance_figures())
 
     def _distance_card(self) -> Path:
         return self.models / f"distance_{self.pair}.json"
@@ -332,7 +329,7 @@ class PairBuild:
         card = json.loads(card_path.read_text())
         card["certificates"] = [{**cert, "command": "nehmo pair build (distance-certificate)"}]
         card_path.write_text(json.dumps(card, indent=1) + "\n")
-        return StageRecord("distance-certificate", 0.0, [], cert)
+        return StageRecord([], cert)
 
     def _value(self, game: str) -> StageRecord:
         run = self.work / f"value_{game}"
@@ -369,7 +366,7 @@ class PairBuild:
             "train_wall_time_s": meta.get("wall_seconds"),
             "below_boundary": check,
         }
-        return StageRecord(f"value:{game}", 0.0, [command], figures)
+        return StageRecord([command], figures)
 
     def _certify(self, game: str) -> StageRecord:
         from nehmo_core.planning.settings import PlannerSettings
@@ -390,9 +387,7 @@ class PairBuild:
         meta = json.loads((self.models / f"value_{game}_{self.slug}.json").read_text())
         certs = [c for c in meta["card"].get("certificates", []) if abs(c["tau"] - tau) < 1e-9]
         keep = ("delta", "violations", "samples", "epsilon", "certified", "accepted_share")
-        return StageRecord(
-            f"certify:{game}", 0.0, [command], {"tau": tau, **{k: certs[-1][k] for k in keep}}
-        )
+        return StageRecord([command], {"tau": tau, **{k: certs[-1][k] for k in keep}})
 
     def _falsify(self, game: str) -> StageRecord:
         args = [
@@ -400,7 +395,7 @@ class PairBuild:
             "--samples", str(self.budget.falsify_samples), "--seed", str(self.seed + 4004),
         ]  # fmt: skip
         result = self._python(f"falsification of {game}", args)
-        return StageRecord(f"falsify:{game}", 0.0, [], result)
+        return StageRecord([], result)
 
     def _card(self) -> StageRecord:
         stages = {k: v for k, v in self.state["stages"].items()}
@@ -423,7 +418,7 @@ class PairBuild:
         }
         path = self.models / f"{self.pair}.card.json"
         path.write_text(json.dumps(card, indent=2) + "\n")
-        return StageRecord("card", 0.0, [], {"card": str(path)})
+        return StageRecord([], {"card": str(path)})
 
 
 CALIBRATION_TARGET = 0.009

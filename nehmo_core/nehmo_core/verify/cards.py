@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from nehmo_core.errors import InvalidValueError, NehmoError
-from nehmo_core.robots.registry import MODELS_DIR, model_file
+from nehmo_core.robots.registry import model_file
 from nehmo_core.verify.certify import Certificate
 
 SUMMARY_KEYS = (
@@ -27,8 +27,8 @@ def shipped_card_path(name: str, variant: str | None = None) -> Path:
     try:
         path = model_file(name, f"value_{name}_{slug}.json")
     except NehmoError:
-        path = MODELS_DIR / f"value_{name}_{slug}.json"
-    if not path.exists():
+        path = None
+    if path is None or not path.exists():
         raise InvalidValueError(
             "--card", "needs a shipped model name (and variant)", f"{name} {variant}"
         )

@@ -17,7 +17,6 @@ import torch
 from nehmo_core.errors import NehmoError
 from nehmo_core.geometry.distance_data import (
     SWAPPED_PAIRS,
-    pair_cell,
     pair_joint_domain,
     system_pair_cell,
 )
@@ -61,10 +60,8 @@ class SwappedBoundary(torch.nn.Module):
 
 def pair_symmetry(pair: str) -> JointMap:
     """The mirror map of a pair's joint vector (arm 1's, then arm 2's)."""
-    cell, a, b = pair_cell(SWAPPED_PAIRS.get(pair, pair))
-    if pair in SWAPPED_PAIRS:
-        a, b = b, a
-    return robot_mirror_map(cell.arm(a).robot.name) + robot_mirror_map(cell.arm(b).robot.name)
+    cell, a, b = system_pair_cell(pair)
+    return _pair_map(cell.arm(a).robot, cell.arm(b).robot)
 
 
 def make_arm_pair_system(pair: str) -> ArmPairSystem:
@@ -79,7 +76,7 @@ def make_arm_pair_system(pair: str) -> ArmPairSystem:
     source = SWAPPED_PAIRS.get(pair, pair)
     cell, a, b = system_pair_cell(pair)
     r1, r2 = cell.arm(a).robot, cell.arm(b).robot
-    f = _pair_map(r1, r2)
+    f = pair_symmetry(pair)
     distance = load_distance_model(source).float()
     boundary = SwappedBoundary(distance, r1.dof, r2.dof) if pair in SWAPPED_PAIRS else distance
     # A conditioned pair (``*_any``): r is a constant coordinate; the mirror y → −y keeps both
