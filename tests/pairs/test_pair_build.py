@@ -126,8 +126,12 @@ def test_a_build_goes_on_where_it_stopped(built, monkeypatch: pytest.MonkeyPatch
     before = dict(state["stages"])
     del state["stages"][f"falsify:{PAIR}"], state["stages"]["card"]  # as if stopped there
     (work / "state.json").write_text(json.dumps(state))
+    manifest = models / f"{PAIR}.pairs.yaml"
+    written = manifest.read_text()
+    manifest.unlink()  # a model folder made anew at the same path: the later stages need it
     build = PairBuild(ARM, ARM, models=models, work=work, budget="tiny", progress=False)
     build.run()
+    assert manifest.read_text() == written
     after = json.loads((work / "state.json").read_text())["stages"]
     for stage in ("check", "labels", "distance", f"value:{PAIR}"):
         assert after[stage] == before[stage]  # not run again

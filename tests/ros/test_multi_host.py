@@ -12,22 +12,21 @@ namespaces are removed after the run, also when it fails.
 
 Needs root and ``ip netns``; skipped otherwise, with the reason, except where the test must run:
 with ``CI`` set (CI runs as root with ``ip netns``) or ``NEHMO_REQUIRE_NETNS=1`` every test of
-the module fails instead, so a CI machine without namespaces cannot lose the only multi-host
-test to one ``-ra`` line.
+the module fails instead (``tests/_netns.py``), so a CI machine without namespaces cannot lose
+it to one ``-ra`` line.
 """
 
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
-from collections.abc import Iterator
-from contextlib import contextmanager, suppress
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _netns import Host, hosts, own_namespaces, require_netns
 from _ros_testutil import DOMAIN_ID, child_env
 
 from nehmo_core.eval.metrics import EpisodeResult, evaluate_log
@@ -40,37 +39,10 @@ from nehmo_ros.suite import EpisodeRun, run_episode
 from nehmo_ros.suite_settings import SuiteSettings
 
 
-def _netns_unavailable() -> str:
-    """Why network namespaces cannot be made here, or ''."""
-    if os.geteuid() != 0:
-        return "network namespaces need root"
-    if shutil.which("ip") is None:
-        return "the 'ip' tool (iproute2) is not installed"
-    probe = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, check=False)
-    if probe.returncode != 0:
-        return f"'ip netns' is unavailable: {probe.stderr.strip()}"
-    return ""
-
-
-def _netns_required() -> bool:
-    """Whether this environment must run the test (CI, or asked for): then a missing
-    ``ip netns`` is a failure, not a skip."""
-    ci = os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
-    return ci or os.environ.get("NEHMO_REQUIRE_NETNS", "") == "1"
-
-
 @pytest.fixture(scope="module", autouse=True)
 def _network_namespaces() -> None:
     """Skip the module (or fail it where it must run) before any episode starts."""
-    reason = _netns_unavailable()
-    if not reason:
-        return
-    if _netns_required():
-        pytest.fail(
-            f"multi-host test required here (CI or NEHMO_REQUIRE_NETNS=1) but cannot run: {reason}",
-            pytrace=False,
-        )
-    pytest.skip(f"multi-host test skipped: {reason} (set NEHMO_REQUIRE_NETNS=1 to fail instead)")
+    require_netns("multi-host test")
 
 
 CELL = load_cell("dual_ur5")
@@ -80,88 +52,7 @@ STARTUP_TIMEOUT = 240.0  # [s] generous: a loaded CI machine starts processes sl
 STOP_TIMEOUT = 10.0  # [s] after SIGINT before SIGKILL
 PREFIX = f"nehmo-mh-{os.getpid()}-"  # every namespace of this test run starts with it
 SUBNET = "10.231.0"
-DEVICE = "eth0"  # a host's end of its veth (in the host's namespace)
 MIN_RX_BYTES = 100_000  # every host receives more than this (an episode moves about 1 MB)
-
-
-def ip(*args: str) -> str:
-    """Run ``ip <args>``; its output (raises with ip's message on failure)."""
-    done = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30, check=False)
-    if done.returncode != 0:
-        raise RuntimeError(f"ip {' '.join(args)}: {done.stderr.strip()}")
-    return done.stdout
-
-
-def own_namespaces() -> list[str]:
-    """The namespaces of this test run that exist."""
-    names = (line.split()[0] for line in ip("netns", "list").splitlines() if line.strip())
-    return [n for n in names if n.startswith(PREFIX)]
-
-
-@dataclass(frozen=True)
-class Host:
-    name: str  # role: "sim" or an arm id
-    netns: str
-    address: str
-
-    def rx_bytes(self) -> int:
-        """Bytes received so far on the host's veth end."""
-        path = f"/sys/class/net/{DEVICE}/statistics/rx_bytes"
-        done = subprocess.run(
-            ["ip", "netns", "exec", self.netns, "cat", path],
-            capture_output=True,
-            text=True,
-            timeout=30,
-            check=True,
-        )
-        return int(done.stdout)
-
-
-@contextmanager
-def hosts(roles: list[str]) -> Iterator[dict[str, Host]]:
-    """One namespace per role, each joined by a veth pair to ``br0`` in a hub namespace; all
-    namespaces (and with them the veth and bridge devices) are deleted on exit."""
-    hub = PREFIX + "hub"
-    made: list[str] = []
-    try:
-        ip("netns", "add", hub)
-        made.append(hub)
-        ip("-n", hub, "link", "set", "lo", "up")
-        ip("-n", hub, "link", "add", "br0", "type", "bridge")
-        ip("-n", hub, "link", "set", "br0", "up")
-        out: dict[str, Host] = {}
-        for i, role in enumerate(roles, start=1):
-            host = Host(role, PREFIX + role.replace("_", ""), f"{SUBNET}.{i}")
-            ip("netns", "add", host.netns)
-            made.append(host.netns)
-            port = f"veth{i}"  # the hub's end
-            ip(
-                "-n",
-                hub,
-                "link",
-                "add",
-                port,
-                "type",
-                "veth",
-                "peer",
-                "name",
-                DEVICE,
-                "netns",
-                host.netns,
-            )
-            ip("-n", hub, "link", "set", port, "master", "br0")
-            ip("-n", hub, "link", "set", port, "up")
-            ip("-n", host.netns, "link", "set", "lo", "up")
-            ip("-n", host.netns, "addr", "add", f"{host.address}/24", "dev", DEVICE)
-            ip("-n", host.netns, "link", "set", DEVICE, "up")
-            # SUBNET discovery announces itself by multicast: route it out of the veth.
-            ip("-n", host.netns, "route", "add", "224.0.0.0/4", "dev", DEVICE)
-            out[role] = host
-        yield out
-    finally:
-        for netns in reversed(made):
-            with suppress(RuntimeError, subprocess.SubprocessError):
-                ip("netns", "del", netns)
 
 
 @dataclass(frozen=True)
@@ -196,8 +87,8 @@ def run_on_hosts(scenario_file: Path, out_dir: Path) -> MultiHostRun:
     sim = {"use_sim_time": True}
     procs: list[Process] = []
     codes: dict[str, int | None] = {}
-    with hosts(["sim", *CELL.arm_ids]) as net:
-        namespaces = own_namespaces()
+    with hosts(PREFIX, SUBNET, ["sim", *CELL.arm_ids]) as net:
+        namespaces = own_namespaces(PREFIX)
         rx_before = {role: h.rx_bytes() for role, h in net.items()}
         try:
 
@@ -362,6 +253,6 @@ def test_no_namespace_of_the_test_remains(request: pytest.FixtureRequest) -> Non
     # well, which is what this test checks. Any other error (in the test's own code, say) fails.
     with suppress(AssertionError, RuntimeError, subprocess.SubprocessError):
         run = request.getfixturevalue("multi_host")
-    assert own_namespaces() == []
+    assert own_namespaces(PREFIX) == []
     if run is not None:
         assert len(run.namespaces_during_run) == 2 + len(CELL.arm_ids)  # hub, sim, planners

@@ -1,4 +1,5 @@
-"""Batches of episodes over a process pool: one episode per task, one bag (log) per episode.
+"""Batches of episodes over a process pool or a Ray cluster (:mod:`nehmo_core.cluster`): one
+episode per task, one bag (log) per episode.
 
 Each worker process keeps its simulators, value models (compiled once, cached on disk) and
 decentralized planners between episodes; centralized planners plan each scenario anew. The
@@ -6,19 +7,28 @@ metrics of a row are computed from its logs (:func:`nehmo_core.eval.metrics.eval
 checked against the runner's in-memory results. An episode that raises, or whose log cannot be
 read, stays in the row as an ``error`` with its reason (the traceback goes to stderr); the row
 goes on.
+
+Every finished episode leaves a small record beside its bag (``episode_NNNN.done.json``: what
+it ran, its wall time). With ``resume=True`` an episode whose record matches this run (same
+setup, row, scenario, planner settings and value models) and whose bag reads back is not run
+again; its result comes from its bag as any other's.
 """
 
 from __future__ import annotations
 
-import multiprocessing
+import dataclasses
+import hashlib
+import json
 import os
+import tempfile
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from nehmo_core.cluster import ClusterSpec, make_executor, pack_folder, unpack_folder
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.metrics import (
     EpisodeResult,
@@ -170,15 +180,60 @@ def _episode(
     return job.position, result, time.perf_counter() - start, used
 
 
+def _run_job_shipped(
+    config: BatchConfig, job: _Job
+) -> tuple[int, EpisodeResult, float, dict[str, Any], dict[str, bytes]]:
+    """:func:`_run_job` on a cluster node: the bag is written to a folder of the node's own and
+    returned with the result, so the node needs no access to the driver's output folder."""
+    with tempfile.TemporaryDirectory(prefix="nehmo-episode-") as tmp:
+        local = dataclasses.replace(job, log_path=Path(tmp) / job.log_path.name)
+        position, result, wall, used = _run_job(config, local)
+        return position, result, wall, used, pack_folder(local.log_path)
+
+
 # -- driver side ---------------------------------------------------------------------------------
-def _executor(workers: int) -> Executor | None:
-    if workers <= 1:
+def _record_path(job: _Job) -> Path:
+    return job.log_path.with_name(job.log_path.name + ".done.json")
+
+
+def _fingerprint(config: BatchConfig, job: _Job) -> str:
+    """What makes an episode the same episode: a resumed run reuses a bag only on a match."""
+    what = {
+        "setup": config.setup,
+        "row": job.row,
+        "set_seed": job.set_seed,
+        "index": job.index,
+        "scenario": repr(job.scenario),
+        "planner_settings": config.planner_settings.to_dict(),
+        "value_models": [str(v) for v in config.value_models],
+        "backend": config.backend,
+        "episode": config.episode_settings().to_dict(),
+    }
+    return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _write_record(config: BatchConfig, job: _Job, wall: float, used: dict[str, Any]) -> None:
+    path = _record_path(job)
+    tmp = path.with_suffix(".tmp")
+    record = {"fingerprint": _fingerprint(config, job), "wall_seconds": wall, "used": used}
+    tmp.write_text(json.dumps(record, default=str) + "\n")
+    tmp.replace(path)
+
+
+def _finished(
+    config: BatchConfig, job: _Job
+) -> tuple[int, EpisodeResult, float, dict[str, Any]] | None:
+    """A finished episode of an earlier run of this very job (record and readable bag)."""
+    try:
+        record = json.loads(_record_path(job).read_text())
+    except (OSError, ValueError):
         return None
-    return ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=init_worker,
-    )
+    if record.get("fingerprint") != _fingerprint(config, job):
+        return None
+    result = evaluate_or_error(job.log_path)
+    if result.outcome == "error":
+        return None
+    return job.position, result, float(record["wall_seconds"]), record["used"]
 
 
 def _jobs(config: BatchConfig, row: str, scenarios: ScenarioSet) -> list[_Job]:
@@ -196,13 +251,18 @@ def run_rows(
     workers: int = 1,
     progress: bool = True,
     on_row: Callable[[RowRun], None] | None = None,
+    cluster: ClusterSpec | None = None,
+    resume: bool = False,
 ) -> list[RowRun]:
-    """Run every row on every scenario; rows one after the other, episodes in parallel."""
+    """Run every row on every scenario; rows one after the other, episodes in parallel (over
+    ``workers`` local processes, or as Ray tasks when ``cluster`` is Ray). With ``resume``,
+    episodes an earlier run of the same jobs finished are read from their bags, not rerun."""
     from tqdm import tqdm
 
     cell = load_cell(get_setup(config.setup).cell)
     kinds_of = {row: parse_row(row, cell) for row in rows}  # fail early on a bad row
-    executor = _executor(workers)
+    cluster = cluster or ClusterSpec("local")
+    executor = make_executor(workers, cluster, init_worker)
     runs = []
     try:
         for row in rows:
@@ -213,13 +273,16 @@ def run_rows(
             models: dict[str, Any] = {}
             unmodelled: dict[str, list[str]] = {}
             epsilon: dict[str, str] = {}
+            done = [_finished(config, job) if resume else None for job in jobs]
+            todo = [job for job, d in zip(jobs, done, strict=True) if d is None]
+            for job in todo:  # an earlier record must not vouch for a bag being rewritten
+                _record_path(job).unlink(missing_ok=True)
             with tqdm(total=len(jobs), desc=f"{config.setup} {row}", disable=not progress) as bar:
-                if executor is None:
-                    outputs: Any = (_run_job(config, job) for job in jobs)
-                else:
-                    futures = [executor.submit(_run_job, config, job) for job in jobs]
-                    outputs = (f.result() for f in as_completed(futures))
-                for position, result, wall, used in outputs:
+                earlier = [d for d in done if d is not None]  # finished by an earlier run
+                fresh = _outputs(config, todo, executor, cluster)
+                for is_new, (position, result, wall, used) in _chain(earlier, fresh):
+                    if is_new and result.outcome != "error":
+                        _write_record(config, jobs[position], wall, used)
                     memory[position], seconds[position] = result, wall
                     models.update(used["value_models"])
                     unmodelled.update(used["unmodelled_peers"])
@@ -256,6 +319,32 @@ def run_rows(
         if executor is not None:
             executor.shutdown(cancel_futures=True)
     return runs
+
+
+def _chain(earlier: list[Any], fresh: Any) -> Any:
+    """``(False, output)`` for each earlier run's output, then ``(True, output)`` as new ones
+    come."""
+    for output in earlier:
+        yield False, output
+    for output in fresh:
+        yield True, output
+
+
+def _outputs(config: BatchConfig, jobs: Sequence[_Job], executor: Any, cluster: ClusterSpec) -> Any:
+    """``(position, result, wall, used)`` of each job as it finishes; on a cluster the bag
+    comes back with the result and is written here, where a local run writes it."""
+    if executor is None:
+        yield from (_run_job(config, job) for job in jobs)
+        return
+    if not cluster.is_ray:
+        futures = [executor.submit(_run_job, config, job) for job in jobs]
+        yield from (f.result() for f in as_completed(futures))
+        return
+    shipped = {executor.submit(_run_job_shipped, config, job): job for job in jobs}
+    for future in as_completed(shipped):
+        position, result, wall, used, files = future.result()
+        unpack_folder(files, shipped[future].log_path)
+        yield position, result, wall, used
 
 
 def _postfix(results: Any) -> str:

@@ -22,6 +22,7 @@ import sys
 import time
 from pathlib import Path
 
+from nehmo_core.cluster import CLUSTER_HELP, parse_cluster
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.eval.batch import BatchConfig, RowRun, run_rows
 from nehmo_core.eval.metrics import format_metrics
@@ -56,7 +57,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--episodes", type=int, default=100, help="scenarios per row")
     parser.add_argument("--seed", type=int, default=0, help="selects the scenario set")
     parser.add_argument("--out", type=Path, required=True, help="output directory")
-    parser.add_argument("--workers", type=int, default=1, help="worker processes")
+    parser.add_argument("--workers", type=int, default=1, help="worker processes (local)")
+    parser.add_argument("--cluster", default="local", help=CLUSTER_HELP)
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the episodes an earlier run into --out finished with the same settings "
+        "(setups; not --tasks)",
+    )
     parser.add_argument(
         "--value-model",
         action="append",
@@ -140,7 +148,9 @@ def _run_tasks(args: argparse.Namespace, rows: list[str], settings: PlannerSetti
         ours: dict[str, float] = row["ours"]  # type: ignore[assignment]
         print(f"tasks {row['row']}: {format_metrics(ours)}", file=sys.stderr)
 
-    summary = run_tasks(config, rows, tasks, args.workers, not args.no_progress, report)
+    summary = run_tasks(
+        config, rows, tasks, args.workers, not args.no_progress, report, parse_cluster(args.cluster)
+    )
     if summary["skipped"]:
         reasons = "; ".join(f"{s['task']}: {s['reason']}" for s in summary["skipped"])
         print(
@@ -171,6 +181,9 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidValueError("--episodes", "must be >= 1", args.episodes)
     if args.workers < 1:
         raise InvalidValueError("--workers", "must be >= 1", args.workers)
+    cluster = parse_cluster(args.cluster)
+    if args.resume and args.tasks is not None:
+        raise InvalidValueError("--resume", "applies to --setup runs, not --tasks", "--tasks")
     rows = [r.strip() for r in args.planners.split(",") if r.strip()]
     if not rows:
         raise InvalidValueError("--planners", "must name at least one row", args.planners)
@@ -211,7 +224,16 @@ def run(args: argparse.Namespace) -> int:
             print(f"  {arm_id}: {note}", file=sys.stderr)
 
     start = time.perf_counter()
-    runs = run_rows(config, rows, scenarios, args.workers, not args.no_progress, report)
+    runs = run_rows(
+        config,
+        rows,
+        scenarios,
+        args.workers,
+        not args.no_progress,
+        report,
+        cluster=cluster,
+        resume=args.resume,
+    )
     summary = setup_summary(
         args.setup,
         runs,
@@ -220,6 +242,7 @@ def run(args: argparse.Namespace) -> int:
             "episodes": len(scenarios),
             "scenario_candidates": scenarios.candidates,
             "workers": args.workers,
+            "cluster": cluster.describe(),
             "value_model_sources": [str(s) for s in config.value_models],
             "episode_settings": config.episode_settings().to_dict(),
             "planner_settings": planner_settings.to_dict(),

@@ -17,17 +17,19 @@ arm count.
 
 from __future__ import annotations
 
-import multiprocessing
+import dataclasses
 import platform
+import tempfile
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from nehmo_core.cluster import ClusterSpec, make_executor, pack_folder, unpack_folder
 from nehmo_core.eval.batch import init_worker
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.ha_tasks import HaTask, check_joint_convention, pair_distances
@@ -99,6 +101,17 @@ def _run(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult, dic
     except Exception as exc:
         failed = failed_episode(f"task {task.task_id} of row {row!r}", exc)
         return failed, {"value_models": {}, "unmodelled_peers": {}}
+
+
+def _run_shipped(
+    config: TaskConfig, row: str, task: HaTask
+) -> tuple[EpisodeResult, dict[str, Any], dict[str, bytes]]:
+    """:func:`_run` on a cluster node: the bag goes to a folder of the node's own and comes
+    back with the result."""
+    with tempfile.TemporaryDirectory(prefix="nehmo-task-") as tmp:
+        local = dataclasses.replace(config, out_dir=Path(tmp))
+        result, used = _run(local, row, task)
+        return result, used, pack_folder(_log_path(local, row, task))
 
 
 def _episode(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult, dict[str, Any]]:
@@ -176,20 +189,18 @@ def run_tasks(
     workers: int = 1,
     progress: bool = True,
     on_row: Callable[[dict[str, Any]], None] | None = None,
+    cluster: ClusterSpec | None = None,
 ) -> dict[str, Any]:
-    """Run every row on every runnable task; return the summary (also what ``on_row`` gets,
-    row by row)."""
+    """Run every row on every runnable task (over ``workers`` local processes, or as Ray tasks
+    when ``cluster`` is Ray); return the summary (also what ``on_row`` gets, row by row)."""
     from tqdm import tqdm
 
     runnable, skipped = _runnable(tasks, config, rows)
     for row in rows:  # fail early on a bad row
         for task in runnable:
             parse_row(row, task.cell)
-    executor = (
-        ProcessPoolExecutor(workers, multiprocessing.get_context("spawn"), init_worker)
-        if workers > 1
-        else None
-    )
+    cluster = cluster or ClusterSpec("local")
+    executor = make_executor(workers, cluster, init_worker)
     start = time.perf_counter()
     summaries = []
     try:
@@ -197,11 +208,7 @@ def run_tasks(
             t0 = time.perf_counter()
             used: dict[str, Any] = {"value_models": {}, "unmodelled_peers": {}, "epsilon": {}}
             with tqdm(total=len(runnable), desc=f"tasks {row}", disable=not progress) as bar:
-                if executor is None:
-                    outputs: Any = ((t.task_id, _run(config, row, t)) for t in runnable)
-                else:
-                    futures = {executor.submit(_run, config, row, t): t.task_id for t in runnable}
-                    outputs = ((futures[f], f.result()) for f in as_completed(futures))
+                outputs = _outputs(config, row, runnable, executor, cluster)
                 failed: dict[str, EpisodeResult] = {}
                 for task_id, (result, extra) in outputs:
                     if result.outcome == "error":
@@ -222,6 +229,29 @@ def run_tasks(
         if executor is not None:
             executor.shutdown(cancel_futures=True)
     return task_summary(config, summaries, tasks, skipped, workers, time.perf_counter() - start)
+
+
+def _outputs(
+    config: TaskConfig,
+    row: str,
+    tasks: Sequence[HaTask],
+    executor: Any,
+    cluster: ClusterSpec,
+) -> Any:
+    """``(task id, (result, used))`` as tasks finish; a cluster's bags are written here."""
+    if executor is None:
+        yield from ((t.task_id, _run(config, row, t)) for t in tasks)
+        return
+    if not cluster.is_ray:
+        futures = {executor.submit(_run, config, row, t): t.task_id for t in tasks}
+        yield from ((futures[f], f.result()) for f in as_completed(futures))
+        return
+    shipped = {executor.submit(_run_shipped, config, row, t): t for t in tasks}
+    for future in as_completed(shipped):
+        result, used, files = future.result()
+        task = shipped[future]
+        unpack_folder(files, _log_path(config, row, task))
+        yield task.task_id, (result, used)
 
 
 def _row_summary(

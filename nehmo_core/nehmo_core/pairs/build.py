@@ -161,6 +161,7 @@ class PairBuild:
         self.work.mkdir(parents=True, exist_ok=True)
         self.models.mkdir(parents=True, exist_ok=True)
         self._save()
+        self._restore_manifest()
         stages = self.stages()
         bar = tqdm(stages, desc=f"pair {self.pair}", unit="stage", disable=not self.progress)
         for name, fn in bar:
@@ -174,6 +175,15 @@ class PairBuild:
             self._save()
             tqdm.write(f"  {name}: done in {record.wall_time_s:.0f} s", file=sys.stderr)
         return self.models / f"{self.pair}.card.json"
+
+    def _restore_manifest(self) -> None:
+        """Write the pair manifest again from the check stage's figures if it has gone missing
+        (a new model folder of the same path, a clean checkout): the later stages need it."""
+        if not self.done("check") or (self.models / f"{self.pair}.pairs.yaml").exists():
+            return
+        figures = self.state["stages"]["check"]["figures"]
+        low, high = figures["base_range_m"]
+        write_manifest(self.models, self.robots, (low, high), figures["variant"])
 
     def _env(self) -> dict[str, str]:
         env = dict(os.environ)
