@@ -7,7 +7,8 @@ mount namespace, as separate machines would. A 20-episode evaluation runs once w
 runner (two processes) and once on the cluster, where one worker process is killed while it runs
 an episode. The per-episode outcomes must be the same, every episode counted once.
 
-Also here, without a cluster: ``--cluster`` parsing, Ray missing, and ``--resume``.
+Also here, without a cluster: ``--cluster`` parsing, Ray missing, ``--resume``, and
+``nehmo verify``'s rollouts on a Ray instance of this machine against the same in-process.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from _netns import Host, hosts, own_namespaces, require_netns
 
@@ -33,8 +35,12 @@ from nehmo_core import cluster as cluster_module
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.eval import batch as batch_module
 from nehmo_core.eval.batch import BatchConfig, run_rows
+from nehmo_core.hjr import load_value_function
+from nehmo_core.pairs.build import PairBuild
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenarios import generate_scenario_set
+from nehmo_core.verify.certify import RemoteRollouts, VerifySettings, worst_margins
+from nehmo_core.verify.truth import exact_margin
 
 SETUP, ROW, EPISODES, SEED = "dual_ur5", "nehmo", 20, 7
 PREFIX = f"nehmo-ray-{os.getpid()}-"
@@ -115,6 +121,45 @@ def test_resume_keeps_finished_episodes_and_runs_the_rest(
     other = BatchConfig(setup=SETUP, out_dir=tmp_path, backend="vm")
     run_rows(other, ["naive"], scenarios, workers=1, progress=False, resume=True)
     assert ran == [0, 1, 2, 3]
+
+
+def test_a_pair_build_names_a_bad_cluster(tmp_path: Path) -> None:
+    with pytest.raises(InvalidValueError, match="--cluster"):
+        PairBuild("ur5", "ur5", models=tmp_path, work=tmp_path / "w", cluster="dask")
+
+
+@pytest.fixture
+def local_ray() -> Iterator[cluster_module.RayExecutor]:
+    """A Ray instance of this machine (two CPUs) for the tests that need no several hosts."""
+    import ray
+
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="WARNING")
+    try:
+        yield cluster_module.RayExecutor()
+    finally:
+        ray.shutdown()
+
+
+def test_verify_rollouts_on_ray_are_the_local_ones(local_ray: cluster_module.RayExecutor) -> None:
+    """Chunks of a certificate's rollouts run by Ray workers that load the model themselves:
+    the same margins and worst adversaries as in this process, and the generator ends where
+    a local run leaves it."""
+    value = load_value_function("ur5_ur5")
+    settings = VerifySettings(tau=0.3, chunk=8)
+    x = np.random.default_rng(5).uniform(value.system.lower, value.system.upper, (24, 12))
+    margin = exact_margin(value.system)
+    try:
+        rng_here, rng_there = np.random.default_rng(9), np.random.default_rng(9)
+        here = worst_margins(value, margin, x, settings, rng_here, "local")
+        remote = RemoteRollouts(local_ray, "ur5_ur5")
+        there = worst_margins(value, margin, x, settings, rng_there, "ray", remote)
+    finally:
+        margin.close()
+    np.testing.assert_allclose(there[0], here[0], atol=1e-6)
+    assert there[1] == here[1]
+    assert rng_there.random() == rng_here.random()
+    assert (here[0] < 0.05).any()  # some rollouts come near contact: the comparison means something
 
 
 # -- on a cluster --------------------------------------------------------------------------------

@@ -41,6 +41,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from nehmo_core.cluster import parse_cluster
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.pairs.budgets import BUDGETS
 from nehmo_core.pairs.check import judge_mirror, pair_names, robot_figures, write_manifest
@@ -80,6 +81,7 @@ class PairBuild:
         threads: int = 2,
         progress: bool = True,
         device: str = "cpu",
+        cluster: str = "local",
     ) -> None:
         known = robot_names()
         for i, robot in enumerate((robot_1, robot_2), start=1):
@@ -102,6 +104,9 @@ class PairBuild:
         self.threads = threads
         self.progress = progress
         self.device = device
+        self.cluster = parse_cluster(cluster)
+        # the rollouts' place changes no figure, so a build may go on elsewhere
+        self.cluster_args = [] if not self.cluster.is_ray else ["--cluster", cluster]
         self.state_path = self.work / "state.json"
         self.state: dict[str, Any] = self._read_state()
 
@@ -391,7 +396,7 @@ class PairBuild:
                 "--samples", str(self.budget.certificate_samples),
                 "--alpha", str(self.budget.alpha),
                 "--search-samples", str(self.budget.search_samples),
-                "--seed", str(self.seed), "--out", str(out), "--card",
+                "--seed", str(self.seed), "--out", str(out), "--card", *self.cluster_args,
             ],
         )  # fmt: skip
         meta = json.loads((self.models / f"value_{game}_{self.slug}.json").read_text())
@@ -403,6 +408,7 @@ class PairBuild:
         args = [
             "falsify", game, "--variant", self.variant,
             "--samples", str(self.budget.falsify_samples), "--seed", str(self.seed + 4004),
+            *self.cluster_args,
         ]  # fmt: skip
         result = self._python(f"falsification of {game}", args)
         return StageRecord([], result)

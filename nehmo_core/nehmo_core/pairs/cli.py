@@ -43,6 +43,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("cpu", "cuda", "auto"),
         help="where value functions train (auto: a CUDA GPU when present, else the CPU)",
     )
+    b.add_argument(
+        "--cluster",
+        default="local",
+        help="where the certificates' and falsification's rollouts run: 'local', 'ray', "
+        "'ray://HOST:PORT' or 'ray:HOST:PORT' (docs/cluster.md); the figures are the same",
+    )
     b.add_argument("--no-progress", action="store_true", help="no progress bars")
     s = sub.add_parser("status", help="what a build has done, stage by stage")
     s.add_argument("work", type=Path, help="the build's work folder")
@@ -66,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         threads=args.threads,
         progress=not args.no_progress,
         device=args.device,
+        cluster=args.cluster,
     )
     card = build.run()
     print(f"{pair}: models and card in {build.models} ({card.name})")

@@ -70,13 +70,17 @@ def distance_certificate(pair: str, samples: int, seed: int, alpha: float) -> di
     return {**cert.to_dict(), "seed": seed}
 
 
-def falsify(game: str, variant: str, samples: int, seed: int) -> dict[str, Any]:
+def falsify(
+    game: str, variant: str, samples: int, seed: int, cluster: str = "local"
+) -> dict[str, Any]:
     """States the planner would call safe, ``V(t_safe) ≥ ε`` with ε = max(the planner's floor,
-    the model's δ certified at t_safe), rolled out against every adversary on exact geometry."""
+    the model's δ certified at t_safe), rolled out against every adversary on exact geometry
+    (on a Ray cluster's workers with ``cluster``, with the same result)."""
+    from nehmo_core.cluster import make_executor, parse_cluster
     from nehmo_core.hjr import load_value_function
     from nehmo_core.planning.settings import PlannerSettings
     from nehmo_core.verify.bound import violation_bound
-    from nehmo_core.verify.certify import VerifySettings, worst_margins
+    from nehmo_core.verify.certify import RemoteRollouts, VerifySettings, worst_margins
     from nehmo_core.verify.distributions import UniformBox, draw_level_set
     from nehmo_core.verify.truth import exact_margin
 
@@ -87,11 +91,16 @@ def falsify(game: str, variant: str, samples: int, seed: int) -> dict[str, Any]:
     eps = max([opt.epsilon, *(c["delta"] for c in certs if abs(c["tau"] - tau) < 1e-6)])
     rng = np.random.default_rng(seed)
     margin = exact_margin(value.system)
+    spec = parse_cluster(cluster)
+    executor = make_executor(1, spec) if spec.is_ray else None
+    remote = None if executor is None else RemoteRollouts(executor, game, variant)
     try:
         x, _, share = draw_level_set(value, UniformBox(value.system), tau, eps, samples, rng)
-        m, _ = worst_margins(value, margin, x, VerifySettings(tau=tau), rng, "falsify")
+        m, _ = worst_margins(value, margin, x, VerifySettings(tau=tau), rng, "falsify", remote)
     finally:
         margin.close()
+        if executor is not None:
+            executor.shutdown()
     k = int((m <= 0).sum())
     return {
         "tau": tau,
@@ -142,6 +151,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.add_argument("--seed", type=int, required=True)
     d.add_argument("--alpha", type=float, required=True)
     f.add_argument("--variant", required=True)
+    f.add_argument("--cluster", default="local", help="where the rollouts run (docs/cluster.md)")
     v.add_argument("--variant", required=True)
     args = parser.parse_args(argv)
     if args.kind == "mirror":
@@ -151,7 +161,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif args.kind == "value-check":
         result = value_check(args.pair, args.variant, args.samples, args.seed)
     else:
-        result = falsify(args.pair, args.variant, args.samples, args.seed)
+        result = falsify(args.pair, args.variant, args.samples, args.seed, args.cluster)
     print("\n" + RESULT + json.dumps(result), flush=True)
     return 0
 

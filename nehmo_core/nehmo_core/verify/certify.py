@@ -103,6 +103,42 @@ class Certificate:
         return asdict(self)
 
 
+@dataclass(frozen=True)
+class RemoteRollouts:
+    """Rollouts as tasks of an executor (a Ray cluster): each chunk of states is rolled out by
+    a worker that loads the value function ``model`` (``variant``) and the exact margin itself.
+    The adversaries' random draws are the ones a local run makes, so results are identical."""
+
+    executor: Any  # concurrent.futures.Executor
+    model: str
+    variant: str | None = None
+
+
+_WORKER: dict[tuple[str, str | None], tuple[Any, ExactMargin]] = {}
+
+
+def _chunk_margins(
+    model: str,
+    variant: str | None,
+    chunk: np.ndarray,
+    settings: VerifySettings,
+    rng_state: dict[str, Any],
+) -> tuple[np.ndarray, list[str]]:
+    """One chunk's worst margins on a worker (the value function and margin kept between
+    chunks); ``rng_state`` is the driver's generator where this chunk's adversaries are drawn."""
+    if (model, variant) not in _WORKER:
+        from nehmo_core.hjr import load_value_function
+        from nehmo_core.verify.truth import exact_margin
+
+        value = load_value_function(model, variant=variant)
+        _WORKER[(model, variant)] = (value, exact_margin(value.system))
+    value, margin = _WORKER[(model, variant)]
+    rng = np.random.default_rng()
+    rng.bit_generator.state = rng_state
+    adv = make_adversaries(value.system, settings.adversaries, chunk.shape[0], settings.dt, rng)
+    return rollout_worst(value, margin, chunk, settings.tau, adv, settings.dt)
+
+
 def worst_margins(
     value: ValueModel,
     margin: ExactMargin,
@@ -110,12 +146,31 @@ def worst_margins(
     settings: VerifySettings,
     rng: np.random.Generator,
     label: str,
+    remote: RemoteRollouts | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     """The smallest exact margin [m] of each state's rollouts over ``settings.tau`` against
-    every adversary, and the adversary that reached it (a contact when ``≤ 0``)."""
+    every adversary, and the adversary that reached it (a contact when ``≤ 0``); on
+    ``remote``'s workers when given, with the same result."""
     margins: list[np.ndarray] = []
     names: list[str] = []
     starts = range(0, x.shape[0], settings.chunk)
+    if remote is not None:
+        futures = []
+        for i in starts:
+            chunk = x[i : i + settings.chunk]
+            state = rng.bit_generator.state
+            # draw this chunk's adversaries here too, so the generator moves on as locally
+            make_adversaries(value.system, settings.adversaries, chunk.shape[0], settings.dt, rng)
+            futures.append(
+                remote.executor.submit(
+                    _chunk_margins, remote.model, remote.variant, chunk, settings, state
+                )
+            )
+        for future in tqdm(futures, desc=label, unit="batch", leave=False):
+            m, who = future.result()
+            margins.append(m)
+            names.extend(who)
+        return np.concatenate(margins), names
     for i in tqdm(starts, desc=label, unit="batch", leave=False):
         chunk = x[i : i + settings.chunk]
         adv = make_adversaries(value.system, settings.adversaries, chunk.shape[0], settings.dt, rng)
@@ -165,13 +220,15 @@ def certify(
     distribution: StateDistribution,
     settings: VerifySettings,
     model: str = "",
+    remote: RemoteRollouts | None = None,
 ) -> Certificate:
-    """Search ``δ`` and certify ``{V(τ, ·) ≥ δ}`` (module docstring); seeded, so repeatable."""
+    """Search ``δ`` and certify ``{V(τ, ·) ≥ δ}`` (module docstring); seeded, so repeatable
+    (the rollouts on ``remote``'s workers when given, with the same result)."""
     start = time.perf_counter()
     rng = np.random.default_rng(settings.seed)
     s = settings
     x, v, _ = draw_level_set(value, distribution, s.tau, 0.0, s.search_samples, rng)
-    m, _ = worst_margins(value, margin, x, s, rng, "search")
+    m, _ = worst_margins(value, margin, x, s, rng, "search", remote)
     violated = m <= 0.0
     delta = search_delta(v, violated, s)
     search = {
@@ -185,7 +242,7 @@ def certify(
     for a in range(s.attempts):
         level = delta + a * s.delta_step
         xc, _, share = draw_level_set(value, distribution, s.tau, level, s.samples, rng)
-        mc, who = worst_margins(value, margin, xc, s, rng, f"certify δ={level:.3f}")
+        mc, who = worst_margins(value, margin, xc, s, rng, f"certify δ={level:.3f}", remote)
         bad = mc <= 0.0
         k = int(bad.sum())
         eps = violation_bound(s.samples, k, beta_each)

@@ -16,12 +16,13 @@ import shlex
 import sys
 from pathlib import Path
 
+from nehmo_core.cluster import make_executor, parse_cluster
 from nehmo_core.errors import InvalidValueError, as_options
 from nehmo_core.hjr import load_value_function
 from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
 from nehmo_core.verify.adversaries import ADVERSARIES, DEFAULT_ADVERSARIES
 from nehmo_core.verify.cards import record_certificate, shipped_card_path
-from nehmo_core.verify.certify import VerifySettings, certify
+from nehmo_core.verify.certify import RemoteRollouts, VerifySettings, certify
 from nehmo_core.verify.distributions import (
     StateDistribution,
     UniformBox,
@@ -79,6 +80,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--card", action="store_true", help="record the certificate in the shipped model card"
     )
+    parser.add_argument(
+        "--cluster",
+        default="local",
+        help="where the rollouts run: 'local' (this process), 'ray', 'ray://HOST:PORT' or "
+        "'ray:HOST:PORT' (docs/cluster.md); the certificate is the same",
+    )
 
 
 def _distribution(args: argparse.Namespace, system: HJISystem) -> StateDistribution:
@@ -114,10 +121,17 @@ def run(args: argparse.Namespace) -> int:
     distribution = _distribution(args, value.system)
     margin = exact_margin(value.system)
     variant = args.variant or value.variant
+    cluster = parse_cluster(args.cluster)
+    executor = make_executor(1, cluster) if cluster.is_ray else None
+    remote = None if executor is None else RemoteRollouts(executor, args.model, args.variant)
     try:
-        cert = certify(value, margin, distribution, settings, model=f"{args.model} ({variant})")
+        cert = certify(
+            value, margin, distribution, settings, model=f"{args.model} ({variant})", remote=remote
+        )
     finally:
         margin.close()
+        if executor is not None:
+            executor.shutdown()
     cert.command = "nehmo verify " + shlex.join(
         sys.argv[2:] if sys.argv[1:2] == ["verify"] else sys.argv[1:]
     )
