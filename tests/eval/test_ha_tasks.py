@@ -144,3 +144,33 @@ def test_a_task_with_a_pair_no_model_covers_is_skipped_with_its_reason(tmp_path:
     for row in summary["rows"]:
         assert row["ours"]["episodes"] == 1  # the one-arm task ran; the skipped one is not counted
     assert "far (no nehmo value model" in (out / "summary.md").read_text()
+
+
+def test_a_resumed_task_run_runs_only_the_unfinished_tasks(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from nehmo_core.eval import task_runner
+
+    tasks = tmp_path / "tasks"
+    tasks.mkdir()
+    for name in ("135003.json", "135011.json"):
+        shutil.copy(TASKS / name, tasks / name)
+    out = tmp_path / "out"
+    argv = ["--tasks", str(tasks), "--planners", "naive", "--out", str(out), "--no-progress"]
+    assert evaluate_main(argv) == 0
+    first = json.loads((out / "summary.json").read_text())["rows"][0]["episodes"]
+    (out / "logs" / "naive" / "task_135011.done.json").unlink()  # as if stopped during it
+    ran: list[str] = []
+    original = task_runner._episode
+
+    def counted(config, row, task):  # type: ignore[no-untyped-def]
+        ran.append(task.task_id)
+        return original(config, row, task)
+
+    monkeypatch.setattr(task_runner, "_episode", counted)
+    assert evaluate_main([*argv, "--resume"]) == 0
+    assert ran == ["135011"]
+    again = json.loads((out / "summary.json").read_text())["rows"][0]["episodes"]
+    assert [(e["task"], e["outcome"], e["end_time"]) for e in again] == [
+        (e["task"], e["outcome"], e["end_time"]) for e in first
+    ]

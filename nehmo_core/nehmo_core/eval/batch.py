@@ -8,17 +8,15 @@ checked against the runner's in-memory results. An episode that raises, or whose
 read, stays in the row as an ``error`` with its reason (the traceback goes to stderr); the row
 goes on.
 
-Every finished episode leaves a small record beside its bag (``episode_NNNN.done.json``: what
-it ran, its wall time). With ``resume=True`` an episode whose record matches this run (same
-setup, row, scenario, planner settings and value models) and whose bag reads back is not run
-again; its result comes from its bag as any other's.
+Every finished episode leaves a record beside its bag (:mod:`nehmo_core.eval.records`). With
+``resume=True`` an episode whose record matches this run (same setup, row, scenario, planner
+settings and value models) and whose bag reads back is not run again; its result comes from
+its bag as any other's.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import json
 import os
 import tempfile
 import time
@@ -29,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from nehmo_core.cluster import ClusterSpec, make_executor, pack_folder, unpack_folder
+from nehmo_core.eval import records
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.metrics import (
     EpisodeResult,
@@ -192,48 +191,27 @@ def _run_job_shipped(
 
 
 # -- driver side ---------------------------------------------------------------------------------
-def _record_path(job: _Job) -> Path:
-    return job.log_path.with_name(job.log_path.name + ".done.json")
-
-
 def _fingerprint(config: BatchConfig, job: _Job) -> str:
     """What makes an episode the same episode: a resumed run reuses a bag only on a match."""
-    what = {
-        "setup": config.setup,
-        "row": job.row,
-        "set_seed": job.set_seed,
-        "index": job.index,
-        "scenario": repr(job.scenario),
-        "planner_settings": config.planner_settings.to_dict(),
-        "value_models": [str(v) for v in config.value_models],
-        "backend": config.backend,
-        "episode": config.episode_settings().to_dict(),
-    }
-    return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()
-
-
-def _write_record(config: BatchConfig, job: _Job, wall: float, used: dict[str, Any]) -> None:
-    path = _record_path(job)
-    tmp = path.with_suffix(".tmp")
-    record = {"fingerprint": _fingerprint(config, job), "wall_seconds": wall, "used": used}
-    tmp.write_text(json.dumps(record, default=str) + "\n")
-    tmp.replace(path)
+    return records.fingerprint(
+        setup=config.setup,
+        row=job.row,
+        set_seed=job.set_seed,
+        index=job.index,
+        scenario=repr(job.scenario),
+        planner_settings=config.planner_settings.to_dict(),
+        value_models=[str(v) for v in config.value_models],
+        backend=config.backend,
+        episode=config.episode_settings().to_dict(),
+    )
 
 
 def _finished(
     config: BatchConfig, job: _Job
 ) -> tuple[int, EpisodeResult, float, dict[str, Any]] | None:
     """A finished episode of an earlier run of this very job (record and readable bag)."""
-    try:
-        record = json.loads(_record_path(job).read_text())
-    except (OSError, ValueError):
-        return None
-    if record.get("fingerprint") != _fingerprint(config, job):
-        return None
-    result = evaluate_or_error(job.log_path)
-    if result.outcome == "error":
-        return None
-    return job.position, result, float(record["wall_seconds"]), record["used"]
+    found = records.read_finished(job.log_path, _fingerprint(config, job))
+    return None if found is None else (job.position, *found)
 
 
 def _jobs(config: BatchConfig, row: str, scenarios: ScenarioSet) -> list[_Job]:
@@ -276,13 +254,14 @@ def run_rows(
             done = [_finished(config, job) if resume else None for job in jobs]
             todo = [job for job, d in zip(jobs, done, strict=True) if d is None]
             for job in todo:  # an earlier record must not vouch for a bag being rewritten
-                _record_path(job).unlink(missing_ok=True)
+                records.forget(job.log_path)
             with tqdm(total=len(jobs), desc=f"{config.setup} {row}", disable=not progress) as bar:
                 earlier = [d for d in done if d is not None]  # finished by an earlier run
                 fresh = _outputs(config, todo, executor, cluster)
                 for is_new, (position, result, wall, used) in _chain(earlier, fresh):
                     if is_new and result.outcome != "error":
-                        _write_record(config, jobs[position], wall, used)
+                        job = jobs[position]
+                        records.write_record(job.log_path, _fingerprint(config, job), wall, used)
                     memory[position], seconds[position] = result, wall
                     models.update(used["value_models"])
                     unmodelled.update(used["unmodelled_peers"])

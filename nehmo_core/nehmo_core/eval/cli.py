@@ -62,8 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--resume",
         action="store_true",
-        help="keep the episodes an earlier run into --out finished with the same settings "
-        "(setups; not --tasks)",
+        help="keep the episodes an earlier run into --out finished with the same settings",
     )
     parser.add_argument(
         "--value-model",
@@ -149,7 +148,14 @@ def _run_tasks(args: argparse.Namespace, rows: list[str], settings: PlannerSetti
         print(f"tasks {row['row']}: {format_metrics(ours)}", file=sys.stderr)
 
     summary = run_tasks(
-        config, rows, tasks, args.workers, not args.no_progress, report, parse_cluster(args.cluster)
+        config,
+        rows,
+        tasks,
+        args.workers,
+        not args.no_progress,
+        report,
+        parse_cluster(args.cluster),
+        args.resume,
     )
     if summary["skipped"]:
         reasons = "; ".join(f"{s['task']}: {s['reason']}" for s in summary["skipped"])
@@ -182,8 +188,6 @@ def run(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise InvalidValueError("--workers", "must be >= 1", args.workers)
     cluster = parse_cluster(args.cluster)
-    if args.resume and args.tasks is not None:
-        raise InvalidValueError("--resume", "applies to --setup runs, not --tasks", "--tasks")
     rows = [r.strip() for r in args.planners.split(",") if r.strip()]
     if not rows:
         raise InvalidValueError("--planners", "must name at least one row", args.planners)

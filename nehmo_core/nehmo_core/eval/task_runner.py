@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from nehmo_core.cluster import ClusterSpec, make_executor, pack_folder, unpack_folder
+from nehmo_core.eval import records
 from nehmo_core.eval.batch import init_worker
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.ha_tasks import HaTask, check_joint_convention, pair_distances
@@ -190,9 +191,11 @@ def run_tasks(
     progress: bool = True,
     on_row: Callable[[dict[str, Any]], None] | None = None,
     cluster: ClusterSpec | None = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """Run every row on every runnable task (over ``workers`` local processes, or as Ray tasks
-    when ``cluster`` is Ray); return the summary (also what ``on_row`` gets, row by row)."""
+    when ``cluster`` is Ray); return the summary (also what ``on_row`` gets, row by row). With
+    ``resume``, tasks an earlier run of the same row finished are read from their bags."""
     from tqdm import tqdm
 
     runnable, skipped = _runnable(tasks, config, rows)
@@ -207,12 +210,29 @@ def run_tasks(
         for row in rows:
             t0 = time.perf_counter()
             used: dict[str, Any] = {"value_models": {}, "unmodelled_peers": {}, "epsilon": {}}
+            by_id = {t.task_id: t for t in runnable}
+            digest = {t.task_id: _fingerprint(config, row, t) for t in runnable}
+            earlier = {
+                t.task_id: found
+                for t in (runnable if resume else ())
+                if (found := records.read_finished(_log_path(config, row, t), digest[t.task_id]))
+            }
+            todo = [t for t in runnable if t.task_id not in earlier]
+            for t in todo:  # an earlier record must not vouch for a bag being rewritten
+                records.forget(_log_path(config, row, t))
+            for found in earlier.values():
+                for key in ("value_models", "unmodelled_peers"):
+                    used[key].update(found[2][key])
             with tqdm(total=len(runnable), desc=f"tasks {row}", disable=not progress) as bar:
-                outputs = _outputs(config, row, runnable, executor, cluster)
+                bar.update(len(earlier))
+                outputs = _outputs(config, row, todo, executor, cluster)
                 failed: dict[str, EpisodeResult] = {}
                 for task_id, (result, extra) in outputs:
                     if result.outcome == "error":
                         failed[task_id] = result
+                    else:
+                        log = _log_path(config, row, by_id[task_id])
+                        records.write_record(log, digest[task_id], 0.0, extra)
                     for key in ("value_models", "unmodelled_peers"):
                         used[key].update(extra[key])
                     bar.update(1)
@@ -229,6 +249,20 @@ def run_tasks(
         if executor is not None:
             executor.shutdown(cancel_futures=True)
     return task_summary(config, summaries, tasks, skipped, workers, time.perf_counter() - start)
+
+
+def _fingerprint(config: TaskConfig, row: str, task: HaTask) -> str:
+    """What makes a task's episode the same episode (for ``resume``)."""
+    return records.fingerprint(
+        row=row,
+        task=task.task_id,
+        cell=repr(task.cell),
+        scenario=repr(task.scenario),
+        planner_settings=config.planner_settings.to_dict(),
+        value_models=[str(v) for v in config.value_models],
+        backend=config.backend,
+        episode=config.episode.to_dict(),
+    )
 
 
 def _outputs(
