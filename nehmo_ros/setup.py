@@ -25,6 +25,7 @@ setup(
     entry_points={
         "console_scripts": [
             "arm_planner = nehmo_ros.arm_planner:main",
+            "command_watchdog = nehmo_ros.command_watchdog:main",
             "recorder = nehmo_ros.recorder:main",
             "orchestrate = nehmo_ros.orchestrate:main",
         ],

@@ -100,6 +100,7 @@ class Process:
 #: The console script of each node module: (package, executable).
 EXECUTABLES: dict[str, tuple[str, str]] = {
     "nehmo_ros.arm_planner": ("nehmo_ros", "arm_planner"),
+    "nehmo_ros.command_watchdog": ("nehmo_ros", "command_watchdog"),
     "nehmo_ros.recorder": ("nehmo_ros", "recorder"),
     "sim_bridge.bridge": ("sim_bridge", "sim_bridge"),
 }
