@@ -11,6 +11,9 @@
   robot's joint order) every ``1/rate`` s from a timer, ``/<id>/planner/status``
   (diagnostic_msgs/DiagnosticStatus) after every command, and the same status on
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once a second, at once when not OK;
+- serves ``/<id>/planner/pause`` and ``/<id>/planner/resume`` (std_srvs/Trigger): paused, the
+  arm is commanded zero velocity and nothing is planned; after resume the first command is zero
+  and the next is planned from the states observed after the resume;
 - publishes ``/<id>/planner/speed_bound`` (std_msgs/Float64) with every command, the speed bound
   the arm keeps (a share of ``u_max``; 1: none), and subscribes to every peer's: a peer that
   keeps its bound is planned against it (:mod:`nehmo_core.planning.stages.speed_bounds`). Planners
@@ -56,6 +59,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
+from std_srvs.srv import Trigger
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.eval.telemetry import stamp, status_message
@@ -255,6 +259,8 @@ class ArmPlannerNode(Node):
                 qos_profile_sensor_data,
             )
         self.create_subscription(JointState, goal_topic(arm_id), self._on_goal, LATCHED)
+        self.create_service(Trigger, f"/{arm_id}/planner/pause", self._on_pause)
+        self.create_service(Trigger, f"/{arm_id}/planner/resume", self._on_resume)
         self.timer = self.create_timer(control.period, self._on_tick)
         self.get_logger().info(
             f"arm {arm_id} of cell {self.cell.name}: planner {p['planner']} (model "
@@ -313,6 +319,27 @@ class ArmPlannerNode(Node):
         self.get_logger().info(
             f"goal {[round(float(x), 3) for x in goal]}", throttle_duration_sec=5.0
         )
+
+    def _on_pause(self, request: Any, response: Any) -> Any:
+        """``/<id>/planner/pause``: zero commands, no planning, until resume."""
+        already = self.controller.paused
+        self.controller.pause()
+        response.success = True
+        response.message = "already paused" if already else "paused: commanding zero velocity"
+        if not already:
+            self.get_logger().info("paused (zero velocity until /planner/resume)")
+        return response
+
+    def _on_resume(self, request: Any, response: Any) -> Any:
+        """``/<id>/planner/resume``: plan again from states observed from now on."""
+        if not self.controller.paused:
+            response.success, response.message = False, "not paused"
+            return response
+        self.controller.resume()
+        response.success = True
+        response.message = "resumed: planning from the current state"
+        self.get_logger().info("resumed")
+        return response
 
     def _on_tick(self) -> None:
         try:

@@ -147,6 +147,8 @@ class ArmController:
         self._worker = SolveWorker(self._solve, name=f"solve_{arm_id}")
         self._bounds = PeerBounds(s.opt.d_max)
         self._bounds_lock = threading.Lock()
+        self._paused = False  # held with zero commands, no planning
+        self._resuming = False  # the next solve starts from an observation made after resume
 
     def telemetry(self, decision: Decision) -> Telemetry:
         """The planner-status telemetry of ``decision`` (the planner's own when it ran)."""
@@ -246,11 +248,42 @@ class ArmController:
         ``now`` [s] is monotonic time (staleness), ``stamp_ns`` the ROS time of the tick.
         """
         obs = self.observe(now, stamp_ns)
+        if self._paused or self._resuming:
+            return self._held_tick(obs)
         decision = self._collect(obs)
         self._count(decision)
         self.last_observation = obs
         if self._worker.submit(obs):
             self._submitted = obs
+        self._tick += 1
+        return decision
+
+    def pause(self) -> None:
+        """Hold the arm with zero commands and plan nothing until :meth:`resume`."""
+        self._paused = True
+
+    def resume(self) -> None:
+        """Plan again, from the states observed from now on: the first command after resume is
+        zero (its tick starts a solve on a fresh observation), the next one is that solve's."""
+        if self._paused:
+            self._paused, self._resuming = False, True
+
+    @property
+    def paused(self) -> bool:
+        return self._paused
+
+    def _held_tick(self, obs: Observation) -> Decision:
+        """A tick while paused or resuming: zero, every plan made before the pause dropped."""
+        self._worker.take()  # a result planned before the pause is never commanded
+        self._submitted = None
+        status = "paused" if self._paused else "resuming"
+        decision = Decision(
+            zeros(self.robot.dof), status, hold=True, tick=obs.tick, observation_ns=obs.stamp_ns
+        )
+        self._count(decision)
+        self.last_observation = obs
+        if self._resuming and self._worker.submit(obs):  # busy with an old solve: next tick
+            self._submitted, self._resuming = obs, False
         self._tick += 1
         return decision
 

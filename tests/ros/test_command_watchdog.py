@@ -1,10 +1,12 @@
-"""The command watchdog between a planner and a velocity controller, with a planner SIGKILLed.
+"""The command watchdog between a planner and a velocity controller, with a planner SIGKILLed;
+the planner's pause and resume services on the way.
 
 A real ``arm_planner`` (naive, dual-UR5 cell) publishes to ``/ur5_0/planner/commands`` through
 a remap, as a real setup starts it; ``command_watchdog`` forwards to the controller's topic
 ``/ur5_0/velocity_controller/commands``, which a plain rclpy probe in the test process reads
 (the probe also publishes both arms' joint states and ur5_0's goal). Once the arm is commanded
-to move, the planner is SIGKILLed: zeros must follow on the controller's topic, tripped only
+to move, the probe pauses the planner (zeros follow) and resumes it (it moves again); then the
+planner is SIGKILLed: zeros must follow on the controller's topic, tripped only
 after the timeout, and nothing else after them. Then the probe sends a valid command (forwarded:
 the watchdog lets go) and a NaN one (replaced by zeros at once), and stops the watchdog with
 SIGTERM (a last zero, its counters).
@@ -89,6 +91,20 @@ class Probe:
             self.executor.spin_once(timeout_sec=0.01)
         return True
 
+    def call(self, service: str) -> tuple[bool, str]:
+        """Call a std_srvs/Trigger service; (success, message)."""
+        from std_srvs.srv import Trigger
+
+        client = self.node.create_client(Trigger, service)
+        try:
+            assert self.spin(WAIT_S, client.service_is_ready), f"{service} not offered"
+            future = client.call_async(Trigger.Request())
+            assert self.spin(WAIT_S, future.done), f"{service} did not answer"
+            response = future.result()
+            return bool(response.success), str(response.message)
+        finally:
+            self.node.destroy_client(client)
+
     def command(self, data: list[float]) -> None:
         self.planner_side.publish(self.Float64MultiArray(data=data))
 
@@ -107,6 +123,8 @@ def _moving(data: list[float]) -> bool:
 class Run:
     t_kill: float
     t_probe: float  # the probe's own commands start
+    paused: list[list[float]]  # what reached the controller after the pause call
+    answers: list[tuple[bool, str]]  # pause, resume, resume again
     received: list[tuple[float, list[float]]]
     after_valid: list[list[float]]  # what reached the controller after the probe's own command
     after_nan: list[list[float]]  # ... after the probe's NaN command
@@ -145,6 +163,14 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
     try:
         moving = lambda: sum(_moving(d) for _, d in probe.received) >= 10  # noqa: E731
         assert probe.spin(STARTUP_S, moving), planner.output()[-2000:] + watchdog.output()[-2000:]
+        answers = [probe.call("/ur5_0/planner/pause")]
+        mark = len(probe.received)
+        held = lambda: sum(not _moving(d) for _, d in probe.received[mark:]) >= 10  # noqa: E731
+        assert probe.spin(WAIT_S, held)
+        paused = [d for _, d in probe.received[mark:]]
+        answers += [probe.call("/ur5_0/planner/resume"), probe.call("/ur5_0/planner/resume")]
+        mark = len(probe.received)
+        assert probe.spin(WAIT_S, lambda: any(_moving(d) for _, d in probe.received[mark:]))
         planner.proc.send_signal(signal.SIGKILL)
         t_kill = time.monotonic()
         planner.proc.wait(timeout=WAIT_S)
@@ -164,6 +190,8 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
         yield Run(
             t_kill,
             t_probe,
+            paused,
+            answers,
             list(probe.received),
             after_valid,
             after_nan,
@@ -186,7 +214,18 @@ def test_a_killed_planners_arm_gets_zeros_after_the_timeout(run: Run) -> None:
     assert all(not _moving(d) for d in after[first_zero:]), after[first_zero:]
     assert all(len(d) == 6 for d in after)
     ages = [float(a) for a in TRIP.findall(run.watchdog_log)]
-    assert ages and ages[0] > TIMEOUT  # the kill's trip, not before its time
+    assert ages and ages[0] >= TIMEOUT  # the kill's trip, not before its time
+
+
+def test_pause_holds_the_arm_and_resume_moves_it_again(run: Run) -> None:
+    pause, resume, again = run.answers
+    assert pause == (True, "paused: commanding zero velocity")
+    assert resume == (True, "resumed: planning from the current state")
+    assert again == (False, "not paused")
+    # after the pause call at most the commands already on their way move the arm, then zeros
+    first_zero = next(k for k, d in enumerate(run.paused) if not _moving(d))
+    assert first_zero <= 2 and all(not _moving(d) for d in run.paused[first_zero:])
+    assert "paused (zero velocity until /planner/resume)" in run.planner_log
 
 
 def test_a_new_command_is_forwarded_and_a_bad_one_replaced_by_zeros(run: Run) -> None:

@@ -157,3 +157,36 @@ def test_a_non_finite_planned_command_holds(value: float) -> None:
         np.testing.assert_array_equal(d.velocity, np.zeros(6))
     finally:
         c.stop()
+
+
+def test_pause_holds_without_planning_and_resume_plans_from_a_fresh_state() -> None:
+    """Paused: zero commands and no plan() call; the result of a solve started before the
+    pause is never commanded. After resume: one zero command whose tick starts a solve of the
+    state seen then, and the next command is that solve's."""
+    planner = RecordingPlanner()
+    c = _controller(planner)
+    try:
+        t = [k * 0.04 for k in range(12)]
+        _feed(c, t[0], 1.0)
+        c.tick(t[0])  # starts the solve of q0 = 1
+        _wait_idle(c)
+        c.pause()
+        held = []
+        for k in range(1, 5):
+            _feed(c, t[k], 2.0)
+            held.append(c.tick(t[k]))
+        assert [d.status for d in held] == ["paused"] * 4
+        assert all(d.hold and not d.velocity.any() for d in held)
+        assert len(planner.calls) == 1  # only the solve from before the pause
+        c.resume()
+        _feed(c, t[5], 3.0)  # the state after the resume
+        first = c.tick(t[5])
+        _wait_idle(c)
+        assert first.status == "resuming" and not first.velocity.any()
+        _feed(c, t[6], 3.0)
+        second = c.tick(t[6])
+        assert second.status == "optimal" and second.tick == first.tick
+        assert second.velocity[0] == pytest.approx(0.03)  # planned from q0 = 3, not 1 or 2
+        assert [round(float(q[0])) for q in planner.calls] == [1, 3]
+    finally:
+        c.stop()
