@@ -1,9 +1,8 @@
 """`arm_planner` node: plans one arm's joint velocities at a fixed rate with `nehmo_core`.
 
-    install/nehmo_ros/lib/nehmo_ros/arm_planner --ros-args -p arm_id:=ur5_0 -p cell:=dual_ur5
+    ros2 run nehmo_ros arm_planner --ros-args -p arm_id:=ur5_0 -p cell:=dual_ur5
 
-(``ros2 run nehmo_ros arm_planner ...`` where the ROS 2 CLI is installed.) Topics, ``<id>`` =
-``arm_id``:
+Topics, ``<id>`` = ``arm_id``:
 
 - subscribes ``/<a>/joint_states`` of every arm ``a`` of the cell (sensor_msgs/JointState) and
   ``/<id>/goal`` (sensor_msgs/JointState, positions [rad] by joint name);
@@ -11,9 +10,7 @@
   robot's joint order) every ``1/rate`` s from a timer, ``/<id>/planner/status``
   (diagnostic_msgs/DiagnosticStatus) after every command, and the same status on
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once a second, at once when not OK;
-- serves ``/<id>/planner/pause`` and ``/<id>/planner/resume`` (std_srvs/Trigger): paused, the
-  arm is commanded zero velocity and nothing is planned; after resume the first command is zero
-  and the next is planned from the states observed after the resume;
+- serves ``/<id>/planner/pause`` and ``/<id>/planner/resume`` (std_srvs/Trigger: pause);
 - publishes ``/<id>/planner/speed_bound`` (std_msgs/Float64) with every command, the speed bound
   the arm keeps (a share of ``u_max``; 1: none), and subscribes to every peer's: a peer that
   keeps its bound is planned against it (:mod:`nehmo_core.planning.stages.speed_bounds`). Planners
@@ -59,7 +56,6 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
-from std_srvs.srv import Trigger
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.eval.telemetry import stamp, status_message
@@ -82,6 +78,7 @@ from nehmo_ros.node_support import (
     require_text,
     run_main,
 )
+from nehmo_ros.pause import PauseServices
 from nehmo_ros.planners import build_planner, warm_up
 
 #: Goals and the scenario are latched (transient local): a late subscriber still gets them.
@@ -259,8 +256,7 @@ class ArmPlannerNode(Node):
                 qos_profile_sensor_data,
             )
         self.create_subscription(JointState, goal_topic(arm_id), self._on_goal, LATCHED)
-        self.create_service(Trigger, f"/{arm_id}/planner/pause", self._on_pause)
-        self.create_service(Trigger, f"/{arm_id}/planner/resume", self._on_resume)
+        self.pause_services = PauseServices(self, self.controller, arm_id)
         self.timer = self.create_timer(control.period, self._on_tick)
         self.get_logger().info(
             f"arm {arm_id} of cell {self.cell.name}: planner {p['planner']} (model "
@@ -320,27 +316,6 @@ class ArmPlannerNode(Node):
             f"goal {[round(float(x), 3) for x in goal]}", throttle_duration_sec=5.0
         )
 
-    def _on_pause(self, request: Any, response: Any) -> Any:
-        """``/<id>/planner/pause``: zero commands, no planning, until resume."""
-        already = self.controller.paused
-        self.controller.pause()
-        response.success = True
-        response.message = "already paused" if already else "paused: commanding zero velocity"
-        if not already:
-            self.get_logger().info("paused (zero velocity until /planner/resume)")
-        return response
-
-    def _on_resume(self, request: Any, response: Any) -> Any:
-        """``/<id>/planner/resume``: plan again from states observed from now on."""
-        if not self.controller.paused:
-            response.success, response.message = False, "not paused"
-            return response
-        self.controller.resume()
-        response.success = True
-        response.message = "resumed: planning from the current state"
-        self.get_logger().info("resumed")
-        return response
-
     def _on_tick(self) -> None:
         try:
             self._tick()
@@ -349,8 +324,7 @@ class ArmPlannerNode(Node):
                 f"tick failed ({type(err).__name__}: {err}); commanding zero velocity",
                 throttle_duration_sec=WARN_EVERY,
             )
-            command = Float64MultiArray(data=[0.0] * self.robot.dof)
-            self.command_pub.publish(command)
+            self.command_pub.publish(Float64MultiArray(data=[0.0] * self.robot.dof))
             self.published["commands"] += 1
 
     def _tick(self) -> None:
@@ -452,8 +426,7 @@ class ArmPlannerNode(Node):
         self.timer.cancel()
         self.controller.stop()
         if rclpy.ok():
-            command = Float64MultiArray(data=[0.0] * self.robot.dof)
-            self.command_pub.publish(command)
+            self.command_pub.publish(Float64MultiArray(data=[0.0] * self.robot.dof))
             self.published["commands"] += 1
         c = self.controller.counters
         counts = {
