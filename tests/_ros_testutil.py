@@ -69,13 +69,19 @@ class Spinner:
     def spin(self, seconds: float, until: Callable[[], bool] | None = None) -> bool:
         """Spin for ``seconds``, or until ``until()`` holds; returns ``until()``'s last value
         (True without ``until``), so a caller asserts that what it waited for happened."""
-        end = time.monotonic() + seconds
-        while True:
-            if until is not None and until():
-                return True
-            if time.monotonic() >= end:
-                return until is None
-            self.executor.spin_once(timeout_sec=0.01)
+        return spin_until(self.executor, seconds, until)
+
+
+def spin_until(executor: Any, seconds: float, until: Callable[[], bool] | None = None) -> bool:
+    """Spin ``executor`` until ``until()`` holds (True) or ``seconds`` pass (False; True
+    without ``until``)."""
+    end = time.monotonic() + seconds
+    while True:
+        if until is not None and until():
+            return True
+        if time.monotonic() >= end:
+            return until is None
+        executor.spin_once(timeout_sec=0.01)
 
     def close(self) -> None:
         for node in self.nodes:

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from _eval_helpers import record_calls
 from _netns import Host, hosts, own_namespaces, require_netns
 
 from nehmo_core import cluster as cluster_module
@@ -96,14 +97,7 @@ def test_resume_keeps_finished_episodes_and_runs_the_rest(
     logs = first.logs
     # as if the run had stopped during episode 2: its record is gone, its bag half written
     logs[2].with_name(logs[2].name + ".done.json").unlink()
-    ran: list[int] = []
-    original = batch_module._episode
-
-    def counted(config, job, start):  # type: ignore[no-untyped-def]
-        ran.append(job.position)
-        return original(config, job, start)
-
-    monkeypatch.setattr(batch_module, "_episode", counted)
+    ran = record_calls(monkeypatch, batch_module, "_episode", lambda config, job, _: job.position)
     (again,) = run_rows(config, ["naive"], scenarios, workers=1, progress=False, resume=True)
     assert ran == [2]
     kept = [0, 1, 3]

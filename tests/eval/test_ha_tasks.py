@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as pb
 import pytest
+from _eval_helpers import record_calls
 
 from nehmo_core.errors import InvalidValueError, ModelFileError
 from nehmo_core.eval.cli import main as evaluate_main
@@ -160,14 +161,7 @@ def test_a_resumed_task_run_runs_only_the_unfinished_tasks(
     assert evaluate_main(argv) == 0
     first = json.loads((out / "summary.json").read_text())["rows"][0]["episodes"]
     (out / "logs" / "naive" / "task_135011.done.json").unlink()  # as if stopped during it
-    ran: list[str] = []
-    original = task_runner._episode
-
-    def counted(config, row, task):  # type: ignore[no-untyped-def]
-        ran.append(task.task_id)
-        return original(config, row, task)
-
-    monkeypatch.setattr(task_runner, "_episode", counted)
+    ran = record_calls(monkeypatch, task_runner, "_episode", lambda config, row, t: t.task_id)
     assert evaluate_main([*argv, "--resume"]) == 0
     assert ran == ["135011"]
     again = json.loads((out / "summary.json").read_text())["rows"][0]["episodes"]

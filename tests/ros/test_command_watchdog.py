@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
-from _ros_testutil import DOMAIN_ID, child_env
+from _ros_testutil import DOMAIN_ID, child_env, spin_until
 
 from nehmo_core.robots import load_cell
 from nehmo_ros.command_watchdog import planner_topic
@@ -84,12 +84,8 @@ class Probe:
             pub.publish(msg)
 
     def spin(self, seconds: float, until: Callable[[], bool]) -> bool:
-        end = time.monotonic() + seconds
-        while not until():
-            if time.monotonic() >= end:
-                return False
-            self.executor.spin_once(timeout_sec=0.01)
-        return True
+        """Spin until ``until()`` holds (True) or ``seconds`` pass (False)."""
+        return spin_until(self.executor, seconds, until)
 
     def call(self, service: str) -> tuple[bool, str]:
         """Call a std_srvs/Trigger service; (success, message)."""

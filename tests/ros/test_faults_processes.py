@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from _ros_testutil import DOMAIN_ID, REPO, child_env
+from _ros_testutil import DOMAIN_ID, REPO, child_env, spin_until
 
 from nehmo_core.logs import LogFileError, iter_log, read_log, summarize
 from nehmo_core.logs.messages import DiagnosticStatus, JointState
@@ -109,12 +109,7 @@ class Probe:
 
     def spin(self, seconds: float, until: Callable[[], bool]) -> bool:
         """Spin until ``until()`` holds (True) or ``seconds`` pass (False)."""
-        end = time.monotonic() + seconds
-        while not until():
-            if time.monotonic() >= end:
-                return False
-            self.executor.spin_once(timeout_sec=0.01)
-        return True
+        return spin_until(self.executor, seconds, until)
 
     def held_since(self, t_ns: int) -> int:
         """States of ur5_1 stamped after ``t_ns`` with zero velocity."""
