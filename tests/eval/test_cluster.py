@@ -49,6 +49,7 @@ SUBNET = "10.232.0"
 PORT = 6379
 RAY = str(Path(sys.executable).with_name("ray"))
 RUN_TIMEOUT = 900.0  # [s] generous: a loaded CI machine
+STORE = "--object-store-memory=100000000"  # 100 MB a node: bags are small, /dev/shm is shared
 
 
 # -- without a cluster ---------------------------------------------------------------------------
@@ -282,7 +283,7 @@ def cluster_run(tmp_path_factory: pytest.TempPathFactory, local_run: dict) -> It
             start(
                 head.command([
                     RAY, "start", "--head", "--block", f"--node-ip-address={head.address}",
-                    f"--port={PORT}", "--num-cpus=0", f"--temp-dir={temp}",
+                    f"--port={PORT}", "--num-cpus=0", f"--temp-dir={temp}", STORE,
                     "--include-dashboard=false", "--disable-usage-stats",
                 ]),
                 "head.log",
@@ -291,7 +292,7 @@ def cluster_run(tmp_path_factory: pytest.TempPathFactory, local_run: dict) -> It
                 node = net[name]
                 ray_start = (
                     f"mount -t tmpfs tmpfs {temp} && exec {RAY} start --block --address={gcs} "
-                    f"--node-ip-address={node.address} --num-cpus=1"
+                    f"--node-ip-address={node.address} --num-cpus=1 {STORE}"
                 )
                 unshare = ["unshare", "--mount", "--propagation", "private", "sh", "-c"]
                 start(node.command([*unshare, ray_start]), f"{name}.log")
