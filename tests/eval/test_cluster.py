@@ -36,6 +36,7 @@ from nehmo_core import cluster as cluster_module
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.eval import batch as batch_module
 from nehmo_core.eval.batch import BatchConfig, run_rows
+from nehmo_core.geometry.distance_data import labelled, uniform_samples
 from nehmo_core.hjr import load_value_function
 from nehmo_core.pairs.build import PairBuild
 from nehmo_core.robots import load_cell
@@ -155,6 +156,17 @@ def test_verify_rollouts_on_ray_are_the_local_ones(local_ray: cluster_module.Ray
     assert there[1] == here[1]
     assert rng_there.random() == rng_here.random()
     assert (here[0] < 0.05).any()  # some rollouts come near contact: the comparison means something
+
+
+def test_distance_labels_on_ray_are_the_local_ones(local_ray: cluster_module.RayExecutor) -> None:
+    """Exact-distance labels in chunks on Ray workers (each keeps its own PyBullet world): the
+    same values, in the same order, as in this process; a conditioned pair included."""
+    for pair in ("ur5_ur5", "ur5_panda_any"):
+        q = uniform_samples(pair, 4100, np.random.default_rng(3))  # three chunks
+        here = labelled(pair, q, np.random.default_rng(4), workers=1)
+        there = labelled(pair, q, np.random.default_rng(4), executor=local_ray)
+        np.testing.assert_array_equal(there, here)
+        assert (here < 0).any() and (here > 0).any()
 
 
 # -- on a cluster --------------------------------------------------------------------------------

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from nehmo_core.cluster import make_executor, parse_cluster
 from nehmo_core.errors import InvalidValueError, ModelFileError, as_options
 from nehmo_core.geometry.distance_data import (
     CONDITIONED_PAIRS,
@@ -40,6 +41,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--boundary", default="500k", help="near-contact samples (e.g. 500k, 0: none)")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--workers", type=int, default=2)
+    g.add_argument(
+        "--cluster",
+        default="local",
+        help="where the labels are computed: 'local' (--workers processes), 'ray', "
+        "'ray://HOST:PORT' or 'ray:HOST:PORT' (docs/cluster.md); the labels are the same",
+    )
     g.add_argument("--out", type=Path, required=True, help="output .npz file")
     t = sub.add_parser("train", help="fit a distance model on a generated dataset")
     t.add_argument("--pair", choices=ALL_PAIRS, required=True)
@@ -81,8 +88,14 @@ def run(args: argparse.Namespace) -> int:
             )
             if args.workers < 1:
                 raise InvalidValueError("--workers", "must be >= 1", args.workers)
+            cluster = parse_cluster(args.cluster)
             t0 = time.perf_counter()
-            q, d = generate(spec, workers=args.workers)
+            executor = make_executor(1, cluster) if cluster.is_ray else None
+            try:
+                q, d = generate(spec, workers=args.workers, executor=executor)
+            finally:
+                if executor is not None:
+                    executor.shutdown()
         wall = time.perf_counter() - t0
         args.out.parent.mkdir(parents=True, exist_ok=True)
         meta = {"spec": spec.__dict__, "wall_time_s": wall, "n": len(d)}

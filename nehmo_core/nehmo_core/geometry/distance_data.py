@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import multiprocessing as mp
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -151,12 +152,23 @@ class DatasetSpec:
 
 _WORLD: tuple[CellWorld, str, str] | None = None
 _YAW_SIGNS: tuple[float, float] = (1.0, 1.0)
+_PAIR = ""  # the pair whose world _WORLD holds
+
+
+def _label_on_worker(pair: str, chunk: np.ndarray) -> np.ndarray:
+    """:func:`_label` in a cluster worker, which keeps the pair's world between chunks."""
+    if _WORLD is None or pair != _PAIR:
+        if _WORLD is not None:
+            _WORLD[0].close()
+        _init_worker(pair)
+    return _label(chunk)
 
 
 def _init_worker(pair: str) -> None:
-    global _WORLD, _YAW_SIGNS
+    global _WORLD, _YAW_SIGNS, _PAIR
     cell, a, b = pair_cell(pair)
     _WORLD = (CellWorld(cell), a, b)
+    _PAIR = pair
     if pair in CONDITIONED_PAIRS:
         from nehmo_core.planning.models.pair_frame import base_yaw_joint
 
@@ -200,10 +212,18 @@ def _wrap(angle: float) -> float:
     return float((angle + math.pi) % (2.0 * math.pi) - math.pi)
 
 
-def exact_distances(pair: str, q: np.ndarray, workers: int = 1, desc: str = "") -> np.ndarray:
-    """Exact signed distances (N,) for joint vectors ``q`` (N, n1 + n2), in parallel."""
+def exact_distances(
+    pair: str, q: np.ndarray, workers: int = 1, desc: str = "", executor: Any = None
+) -> np.ndarray:
+    """Exact signed distances (N,) for joint vectors ``q`` (N, n1 + n2), in parallel: over
+    ``workers`` local processes, or chunk by chunk on ``executor`` (a Ray cluster's,
+    :mod:`nehmo_core.cluster`) when given; the labels are the same either way."""
     chunks = np.array_split(q, max(1, len(q) // 2000))
-    if workers <= 1:
+    if executor is not None:
+        futures = [executor.submit(_label_on_worker, pair, c) for c in chunks]
+        bar = tqdm(futures, desc=desc or pair, unit="chunk", leave=False)
+        parts = [f.result() for f in bar]
+    elif workers <= 1:
         _init_worker(pair)
         parts = [_label(c) for c in tqdm(chunks, desc=desc or pair, unit="chunk", leave=False)]
     else:
@@ -236,22 +256,30 @@ def uniform_samples(pair: str, n: int, rng: np.random.Generator) -> np.ndarray:
 
 
 def labelled(
-    pair: str, q: np.ndarray, rng: np.random.Generator, workers: int = 1, desc: str = ""
+    pair: str,
+    q: np.ndarray,
+    rng: np.random.Generator,
+    workers: int = 1,
+    desc: str = "",
+    executor: Any = None,
 ) -> np.ndarray:
     """Exact distances (N,) of model inputs ``q``; a conditioned pair's are labelled at random
     base yaws (see :func:`_label`)."""
     if pair in CONDITIONED_PAIRS:
         yaws = rng.uniform(-np.pi, np.pi, size=(len(q), 2))
-        return exact_distances(pair, np.concatenate([q, yaws], axis=1), workers, desc)
-    return exact_distances(pair, q, workers, desc)
+        return exact_distances(pair, np.concatenate([q, yaws], axis=1), workers, desc, executor)
+    return exact_distances(pair, q, workers, desc, executor)
 
 
-def generate(spec: DatasetSpec, workers: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """Generate (q (N, n), d (N,)) for ``spec``: uniform samples, then boundary samples."""
+def generate(
+    spec: DatasetSpec, workers: int = 2, executor: Any = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Generate (q (N, n), d (N,)) for ``spec``: uniform samples, then boundary samples (labelled
+    on ``executor``'s workers when given, with the same result)."""
     rng = np.random.default_rng(spec.seed)
     lo, hi = pair_box(spec.pair)
     q_u = uniform_samples(spec.pair, spec.n_uniform, rng)
-    d_u = labelled(spec.pair, q_u, rng, workers, "uniform")
+    d_u = labelled(spec.pair, q_u, rng, workers, "uniform", executor)
     qs, ds = [q_u], [d_u]
     seeds = q_u[np.abs(d_u) < spec.near]
     if spec.n_boundary > 0 and not len(seeds):
@@ -266,7 +294,7 @@ def generate(spec: DatasetSpec, workers: int = 2) -> tuple[np.ndarray, np.ndarra
         n = min(spec.n_boundary - made, 100_000)
         base = seeds[rng.integers(0, len(seeds), n)]
         q_b = np.clip(base + rng.normal(0.0, spec.noise, base.shape), lo, hi)
-        d_b = labelled(spec.pair, q_b, rng, workers, "boundary")
+        d_b = labelled(spec.pair, q_b, rng, workers, "boundary", executor)
         qs.append(q_b)
         ds.append(d_b)
         seeds = np.concatenate([seeds, q_b[np.abs(d_b) < spec.near]])

@@ -105,7 +105,7 @@ class PairBuild:
         self.progress = progress
         self.device = device
         self.cluster = parse_cluster(cluster)
-        # the rollouts' place changes no figure, so a build may go on elsewhere
+        # where labels and rollouts run changes no figure, so a build may go on elsewhere
         self.cluster_args = [] if not self.cluster.is_ray else ["--cluster", cluster]
         self.state_path = self.work / "state.json"
         self.state: dict[str, Any] = self._read_state()
@@ -292,6 +292,7 @@ class PairBuild:
                         f"--boundary {boundary} --seed {seed} --workers {self.threads}".split(),
                         "--out",
                         str(tmp),
+                        *self.cluster_args,
                     ],
                 )
             )

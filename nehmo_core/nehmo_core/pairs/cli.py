@@ -46,8 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     b.add_argument(
         "--cluster",
         default="local",
-        help="where the certificates' and falsification's rollouts run: 'local', 'ray', "
-        "'ray://HOST:PORT' or 'ray:HOST:PORT' (docs/cluster.md); the figures are the same",
+        help="where the distance labels and the certificates' and falsification's rollouts "
+        "run: 'local', 'ray', 'ray://HOST:PORT' or 'ray:HOST:PORT' (docs/cluster.md); the "
+        "figures are the same",
     )
     b.add_argument("--no-progress", action="store_true", help="no progress bars")
     s = sub.add_parser("status", help="what a build has done, stage by stage")
