@@ -71,6 +71,12 @@ class Spinner:
         (True without ``until``), so a caller asserts that what it waited for happened."""
         return spin_until(self.executor, seconds, until)
 
+    def close(self) -> None:
+        for node in self.nodes:
+            self.executor.remove_node(node)
+            node.destroy_node()
+        self.executor.shutdown(timeout_sec=1.0)
+
 
 def spin_until(executor: Any, seconds: float, until: Callable[[], bool] | None = None) -> bool:
     """Spin ``executor`` until ``until()`` holds (True) or ``seconds`` pass (False; True
@@ -82,12 +88,6 @@ def spin_until(executor: Any, seconds: float, until: Callable[[], bool] | None =
         if time.monotonic() >= end:
             return until is None
         executor.spin_once(timeout_sec=0.01)
-
-    def close(self) -> None:
-        for node in self.nodes:
-            self.executor.remove_node(node)
-            node.destroy_node()
-        self.executor.shutdown(timeout_sec=1.0)
 
 
 @contextmanager

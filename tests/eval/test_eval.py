@@ -322,8 +322,10 @@ def test_evaluate_command_writes_logs_summary_and_table(tmp_path: Path) -> None:
     row = summary["rows"][0]
     assert row["log_check"] == "ok" and row["ours"]["episodes"] == 2
     assert row["paper"]["sr"] == 66
-    logs = sorted((tmp_path / "logs" / "naive").iterdir())  # one bag directory per episode
-    assert [p.name for p in logs] == ["episode_0000", "episode_0001"]
+    logs = sorted(p for p in (tmp_path / "logs" / "naive").iterdir() if p.is_dir())
+    assert [p.name for p in logs] == ["episode_0000", "episode_0001"]  # a bag per episode
+    records = sorted(p.name for p in (tmp_path / "logs" / "naive").glob("*.done.json"))
+    assert records == ["episode_0000.done.json", "episode_0001.done.json"]  # for --resume
     assert [e["log"] for e in row["episodes"]] == [str(p) for p in logs]
     assert sorted(p.name for p in logs[0].iterdir()) == ["episode_0000_0.mcap", "metadata.yaml"]
     assert cli.run(args) == 0  # a second run replaces the bags of the first
