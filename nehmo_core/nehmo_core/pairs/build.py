@@ -46,6 +46,7 @@ from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.pairs.budgets import BUDGETS
 from nehmo_core.pairs.check import judge_mirror, pair_names, robot_figures, write_manifest
 from nehmo_core.pairs.probes import RESULT
+from nehmo_core.pairs.reach import MIN_BASE_DISTANCE
 from nehmo_core.robots import registry
 from nehmo_core.robots.descriptions import robot_names
 
@@ -82,6 +83,8 @@ class PairBuild:
         progress: bool = True,
         device: str = "cpu",
         cluster: str = "local",
+        base_range: tuple[float, float] | None = None,
+        tag: str = "any",
     ) -> None:
         known = robot_names()
         for i, robot in enumerate((robot_1, robot_2), start=1):
@@ -93,8 +96,20 @@ class PairBuild:
             raise InvalidValueError("--budget", f"must be one of {sorted(BUDGETS)}", budget)
         if threads < 1:
             raise InvalidValueError("--threads", "must be >= 1", threads)
+        if not (tag.isidentifier() and tag.islower()):
+            raise InvalidValueError("--tag", "must be a lower-case word (letters, digits, _)", tag)
+        if base_range is not None:
+            low, high = base_range
+            if not MIN_BASE_DISTANCE <= low < high:
+                rule = f"must be LOW HIGH [m] with {MIN_BASE_DISTANCE} <= LOW < HIGH"
+                raise InvalidValueError("--base-range", rule, list(base_range))
+            if tag == "any":
+                rule = "covers a part of the base distances, so it needs a --tag (e.g. far)"
+                raise InvalidValueError("--base-range", rule, list(base_range))
+        self.base_range = None if base_range is None else (float(low), float(high))
+        self.tag = tag
         self.robots = (robot_1, robot_2)
-        self.names = pair_names(robot_1, robot_2)
+        self.names = pair_names(robot_1, robot_2, tag)
         self.pair = self.names[0]
         self.models = models.resolve()
         self.work = work.resolve()
@@ -119,12 +134,14 @@ class PairBuild:
             "budget": self.budget_name,
             "seed": self.seed,
             "models": str(self.models),
+            "base_range": None if self.base_range is None else list(self.base_range),
             "stages": {},
         }
         if not self.state_path.exists():
             return fresh
         state = json.loads(self.state_path.read_text())
-        for key in ("pair", "budget", "seed", "models"):
+        state.setdefault("base_range", None)  # builds before --base-range covered the reach
+        for key in ("pair", "budget", "seed", "models", "base_range"):
             if state.get(key) != fresh[key]:
                 raise InvalidValueError(
                     "--work",
@@ -188,7 +205,7 @@ class PairBuild:
             return
         figures = self.state["stages"]["check"]["figures"]
         low, high = figures["base_range_m"]
-        write_manifest(self.models, self.robots, (low, high), figures["variant"])
+        write_manifest(self.models, self.robots, (low, high), figures["variant"], self.tag)
 
     def _env(self) -> dict[str, str]:
         env = dict(os.environ)
@@ -246,8 +263,11 @@ class PairBuild:
             }
         }
         low, high = base_range(*(figures["robots"][n]["reach_m"] for n in self.robots))
+        figures["reach_base_range_m"] = [low, high]
+        if self.base_range is not None:  # a part of the distances the reach allows
+            low, high = self.base_range
         figures["base_range_m"] = [low, high]
-        write_manifest(self.models, self.robots, (low, high), "bc+sym")
+        write_manifest(self.models, self.robots, (low, high), "bc+sym", self.tag)
         if any("none" in figures["robots"][n]["mirror_map"] for n in self.robots):
             figures["mirror_check"] = {"variant": "bc", "why": "a robot has no mirror map"}
         else:
@@ -257,7 +277,7 @@ class PairBuild:
                 self._python(f"mirror check of {self.pair}", args)
             )
         figures["variant"] = figures["mirror_check"]["variant"]
-        write_manifest(self.models, self.robots, (low, high), figures["variant"])
+        write_manifest(self.models, self.robots, (low, high), figures["variant"], self.tag)
         return StageRecord([], figures)
 
     @property

@@ -18,10 +18,11 @@ MIRROR_TOLERANCE = 0.002
 contact, for which a build trains ``bc+sym`` (the UR5's meshes: 0.7 mm); above it, ``bc``."""
 
 
-def pair_names(robot_1: str, robot_2: str) -> tuple[str, ...]:
-    """The pair (and, for two robots, the swapped game) a build makes: ``A_B_any`` first."""
-    first = f"{robot_1}_{robot_2}_any"
-    return (first,) if robot_1 == robot_2 else (first, f"{robot_2}_{robot_1}_any")
+def pair_names(robot_1: str, robot_2: str, tag: str = "any") -> tuple[str, ...]:
+    """The pair (and, for two robots, the swapped game) a build makes: ``A_B_<tag>`` first
+    (``tag`` is ``any`` unless a build covers a part of the base distances, e.g. ``far``)."""
+    first = f"{robot_1}_{robot_2}_{tag}"
+    return (first,) if robot_1 == robot_2 else (first, f"{robot_2}_{robot_1}_{tag}")
 
 
 def robot_figures(name: str, reach_samples: int, seed: int) -> dict[str, Any]:
@@ -68,10 +69,14 @@ def judge_mirror(result: dict[str, Any]) -> dict[str, Any]:
 
 
 def write_manifest(
-    models: Path, robots: tuple[str, str], base_range: tuple[float, float], variant: str
+    models: Path,
+    robots: tuple[str, str],
+    base_range: tuple[float, float],
+    variant: str,
+    tag: str = "any",
 ) -> Path:
     """``<pair>.pairs.yaml`` in ``models``: the pair (and its swapped game for two robots)."""
-    names = pair_names(*robots)
+    names = pair_names(*robots, tag)
     entries: list[dict[str, Any]] = [
         {
             "name": names[0],

@@ -50,6 +50,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "run: 'local', 'ray', 'ray://HOST:PORT' or 'ray:HOST:PORT' (docs/cluster.md); the "
         "figures are the same",
     )
+    b.add_argument(
+        "--base-range",
+        nargs=2,
+        type=float,
+        metavar=("LOW", "HIGH"),
+        help="[m] cover only these base distances (default: every distance at which the arms' "
+        "collision geometry can touch); needs --tag",
+    )
+    b.add_argument(
+        "--tag",
+        default="any",
+        help="the pair's name is A_B_TAG (default any: every distance); e.g. far with "
+        "--base-range for the far part beside a shipped pair",
+    )
     b.add_argument("--no-progress", action="store_true", help="no progress bars")
     s = sub.add_parser("status", help="what a build has done, stage by stage")
     s.add_argument("work", type=Path, help="the build's work folder")
@@ -62,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidValueError("work", "holds no pair build (no state.json)", str(args.work))
         print(describe(json.loads(state_path.read_text())))
         return 0
-    pair = pair_names(args.robot_a, args.robot_b)[0]
+    pair = pair_names(args.robot_a, args.robot_b, args.tag)[0]
     build = PairBuild(
         args.robot_a,
         args.robot_b,
@@ -74,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         device=args.device,
         cluster=args.cluster,
+        base_range=None if args.base_range is None else tuple(args.base_range),
+        tag=args.tag,
     )
     card = build.run()
     print(f"{pair}: models and card in {build.models} ({card.name})")
