@@ -12,6 +12,7 @@ A robot ``NAME`` is a folder ``NAME/`` holding ``robot.yaml``::
       keypoint_points: [[link, x, y, z], ...]   # points fixed in a link frame [m]
       sphere_radius: 0.08
       sampling_ranges: [[low, high], ...]
+      reach_m: 0.99                 # horizontal reach of the collision geometry [m]
 
 The shipped robots live in ``nehmo_core/robots/data/``; more folders of robots can be named in
 the environment variable ``NEHMO_ROBOTS`` (separated like ``PATH``), e.g. where
@@ -53,6 +54,7 @@ _FACT_KEYS = {
     "keypoint_points",
     "sphere_radius",
     "sampling_ranges",
+    "reach_m",
 }
 
 
@@ -116,6 +118,7 @@ def _facts(raw: Any, where: str) -> RobotFacts:
             sampling_ranges=None
             if ranges is None
             else tuple((float(lo), float(hi)) for lo, hi in ranges),
+            reach_m=None if raw.get("reach_m") is None else float(raw["reach_m"]),
         )
     except (TypeError, ValueError) as exc:
         raise InvalidValueError(where, f"has a malformed entry ({exc})", raw) from None

@@ -52,6 +52,9 @@ class RobotFacts:
     sampling_ranges: tuple[tuple[float, float], ...] | None = None
     """``(low, high)`` [rad] per joint of the evaluation protocol's start/goal draws (None: the
     joint limits clipped to ±π)."""
+    reach_m: float | None = None
+    """[m] Horizontal reach of the collision geometry from the base axis
+    (:func:`~nehmo_core.pairs.reach.horizontal_reach`; None: measured when needed)."""
 
 
 @dataclass(frozen=True)

@@ -93,9 +93,13 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidValueError("--name", "must not name a robot that exists", args.name)
     robot = robot_from_urdf(args.name, args.urdf, report.tip, args.srdf)
     keypoints, segments = default_keypoints(robot)
-    facts = {"keypoints": keypoints, "keypoint_segments": segments}
+    from nehmo_core.pairs.reach import horizontal_reach
+
+    reach = round(horizontal_reach(robot), 4)
+    facts = {"keypoints": keypoints, "keypoint_segments": segments, "reach_m": reach}
     out = write_description(args.dir, args.name, args.urdf, report.tip, args.srdf, facts)
     print(report.summary())
     print(f"  keypoints: {', '.join(keypoints)} (+{sum(k for *_, k in segments)} between them)")
+    print(f"  reach: {reach:.3f} m (horizontal, collision geometry)")
     print(f"wrote {out}; load it by name with {ENV}={args.dir.resolve()}{os.pathsep}...")
     return 0

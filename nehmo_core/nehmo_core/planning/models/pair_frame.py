@@ -38,7 +38,6 @@ from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel, wrap_angle
 __all__ = [
     "ModelGeometry",
     "PairMapping",
-    "arm_reach",
     "base_yaw_joint",
     "constrained_pairs",
     "inverse_pose",
@@ -161,33 +160,22 @@ def match_pair(own: ArmSpec, peer: ArmSpec, models: Sequence[ModelGeometry]) -> 
     return None
 
 
-@functools.cache
-def arm_reach(robot: RobotModel, samples: int = 2000) -> float:
-    """Largest distance [m] of any link-frame origin from the base origin, over random samples
-    (once per robot and process)."""
-    kin = ArmKinematics(robot)
-    rng = np.random.default_rng(0)
-    lo, hi = np.maximum(robot.lower, -np.pi), np.minimum(robot.upper, np.pi)
-    q = torch.from_numpy(rng.uniform(lo, hi, size=(samples, robot.dof)))
-    with torch.no_grad():
-        pts = kin.link_positions(q).numpy()
-    return float(np.linalg.norm(pts, axis=-1).max())
-
-
 def constrained_pairs(
     cell: Cell, arm_id: str, models: Sequence[ModelGeometry], reach_margin: float
 ) -> tuple[dict[str, PairMapping], tuple[str, ...], tuple[str, ...]]:
     """``arm_id``'s peers sorted three ways: ``(pairs, skipped, unmodelled)``, the peers in reach
-    with the mapping into the frame of a model that fits them, the peers farther apart than
-    their two reaches plus ``reach_margin`` [m], and the peers in reach that no model fits."""
+    with the mapping into the frame of a model that fits them, the peers that cannot touch the
+    arm (:func:`~nehmo_core.pairs.reach.can_touch`, with ``reach_margin`` [m] added), and the
+    peers in reach that no model fits."""
+    from nehmo_core.pairs.reach import can_touch
+
     own = cell.arm(arm_id)
     pairs: dict[str, PairMapping] = {}
     skipped, unmodelled = [], []
     for peer in cell.arms:
         if peer.arm_id == arm_id:
             continue
-        gap = np.linalg.norm(np.subtract(peer.base.xyz, own.base.xyz))
-        if gap > arm_reach(own.robot) + arm_reach(peer.robot) + reach_margin:
+        if not can_touch(own, peer, reach_margin):
             skipped.append(peer.arm_id)
             continue
         mapping = match_pair(own, peer, models)

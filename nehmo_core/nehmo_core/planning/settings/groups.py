@@ -42,7 +42,11 @@ class OptSettings:
     )
     wrap_goal: bool = setting(False, "wrap continuous joints in the goal cost (the paper does not)")
     reach_margin: float = setting(
-        0.3, "peers farther apart than both reaches plus this are not constrained", "m", ge=0
+        0.0,
+        "peers whose bases are farther apart than their arms can touch (both collision reaches, "
+        "as the pair models cover them) plus this are not constrained",
+        "m",
+        ge=0,
     )
     deadline: float = setting(
         0.04, "a solve longer than this triggers the fail-safe (one 25 Hz tick)", "s", gt=0
