@@ -13,10 +13,24 @@ from nehmo_core.geometry.distance_data import DatasetSpec, generate
 
 
 def test_boundary_samples_without_near_contact_seeds_are_an_error() -> None:
-    # with a 1 µm "near" band, 3 uniform draws hold no seed for the boundary samples
-    spec = DatasetSpec(pair="ur5_ur5_opposite", n_uniform=3, n_boundary=10, seed=0, near=1e-6)
-    with pytest.raises(InvalidValueError, match=r"n_boundary.*near-contact seeds"):
+    # with a 1 µm "near" band, 3 uniform draws and a search of 3000 more hold no seed
+    spec = DatasetSpec(
+        pair="ur5_ur5_opposite", n_uniform=3, n_boundary=10, seed=0, near=1e-6, seed_search=3000
+    )
+    with pytest.raises(InvalidValueError, match=r"n_boundary.*near-contact seeds.*3000 uniform"):
         generate(spec, workers=1)
+
+
+def test_rare_near_contact_is_searched_for_beyond_the_uniform_set() -> None:
+    # 3 uniform draws hold no state within 5 cm of contact; the search finds seeds and the
+    # set keeps its own 3 uniform samples followed by the boundary samples
+    spec = DatasetSpec(
+        pair="ur5_ur5_opposite", n_uniform=3, n_boundary=20, seed=0, near=0.05, seed_search=9000
+    )
+    q, d = generate(spec, workers=1)
+    assert q.shape == (23, 12) and d.shape == (23,)
+    assert np.all(np.abs(d[:3]) >= 0.05)
+    assert np.mean(np.abs(d[3:]) < 0.2) > 0.5
 
 
 def test_no_boundary_samples_asked_for_is_fine() -> None:

@@ -137,6 +137,8 @@ class DatasetSpec:
     seed: int = 0
     near: float = 0.15
     noise: float = 0.08
+    seed_search: int = 2_000_000
+    """Uniform draws at most (the set's own included) in search of near-contact seeds."""
 
     def __post_init__(self) -> None:
         if self.pair not in PAIRS and self.pair not in CONDITIONED_PAIRS:
@@ -282,11 +284,20 @@ def generate(
     d_u = labelled(spec.pair, q_u, rng, workers, "uniform", executor)
     qs, ds = [q_u], [d_u]
     seeds = q_u[np.abs(d_u) < spec.near]
+    searched, n = spec.n_uniform, max(spec.n_uniform, 1000)
+    while spec.n_boundary > 0 and not len(seeds) and searched < spec.seed_search:
+        # near contact is rare (e.g. a pair's far base distances): more uniform draws, twice as
+        # many each round, used only as seeds of the boundary samples, never part of the set
+        n = min(2 * n, spec.seed_search - searched)
+        q_s = uniform_samples(spec.pair, n, rng)
+        d_s = labelled(spec.pair, q_s, rng, workers, "seeds", executor)
+        seeds = q_s[np.abs(d_s) < spec.near]
+        searched += n
     if spec.n_boundary > 0 and not len(seeds):
         raise InvalidValueError(
             "n_boundary",
-            f"needs near-contact seeds (|d| < {spec.near} m) among the uniform samples, and "
-            f"none of the {spec.n_uniform} drawn is; draw more uniform samples",
+            f"needs near-contact seeds (|d| < {spec.near} m), and none of {searched} uniform "
+            "draws is: can the arms touch at these base distances?",
             spec.n_boundary,
         )
     made = 0
