@@ -30,7 +30,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel, wrap_angle
