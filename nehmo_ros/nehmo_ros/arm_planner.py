@@ -10,7 +10,9 @@ Topics, ``<id>`` = ``arm_id``:
   robot's joint order) every ``1/rate`` s from a timer, ``/<id>/planner/status``
   (diagnostic_msgs/DiagnosticStatus) after every command, and the same status on
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once a second, at once when not OK;
-- serves ``/<id>/planner/pause`` and ``/<id>/planner/resume`` (std_srvs/Trigger: pause);
+- serves ``/<id>/planner/pause`` and ``/<id>/planner/resume`` (std_srvs/Trigger: pause) and
+  the ``/<id>/move_arm`` action (nehmo_interfaces/MoveArm: move_action), which shares the goal
+  topic's code path;
 - publishes ``/<id>/planner/speed_bound`` (std_msgs/Float64) with every command, the speed bound
   the arm keeps (a share of ``u_max``; 1: none), and subscribes to every peer's: a peer that
   keeps its bound is planned against it (:mod:`nehmo_core.planning.stages.speed_bounds`). Planners
@@ -52,13 +54,12 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.eval.telemetry import stamp, status_message
 from nehmo_core.logs import messages as log_msgs
 from nehmo_core.logs.topics import (
     command_topic,
@@ -68,9 +69,11 @@ from nehmo_core.logs.topics import (
     status_topic,
 )
 from nehmo_core.planning.settings import REMOVED, RENAMED, PlannerSettings
-from nehmo_ros.control import ArmController, ControlSettings, Decision
+from nehmo_ros.control import ArmController, ControlSettings
 from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
+from nehmo_ros.move_action import GoalKeeper
 from nehmo_ros.node_support import (
+    NODE_ERRORS,
     Param,
     declare_parameters,
     load_cell_parameter,
@@ -79,6 +82,7 @@ from nehmo_ros.node_support import (
     run_main,
 )
 from nehmo_ros.pause import PauseServices
+from nehmo_ros.planner_report import WARN_EVERY, PlannerReports
 from nehmo_ros.planners import build_planner, warm_up
 
 #: Goals and the scenario are latched (transient local): a late subscriber still gets them.
@@ -96,16 +100,13 @@ NODE_PARAMS: dict[str, Param] = {
     ),
     "model": Param("shipped", "shipped | synthetic | [KIND=]PATH,... (run dir or .safetensors)"),
     "rate": Param(_CONTROL.rate, "[Hz] command rate", 1e-3, 1000.0),
-    "peer_timeout": Param(
-        _CONTROL.peer_timeout, "[s] a joint state older than this is stale", 0.0, 60.0
-    ),
-    "stale_policy": Param(
-        _CONTROL.stale_policy, "hold | fail_safe: what a stale or untrusted peer triggers"
-    ),
+    "peer_timeout": Param(_CONTROL.peer_timeout, "[s] a state older than this is stale", 0, 60),
+    "stale_policy": Param(_CONTROL.stale_policy, "hold | fail_safe: on a stale/untrusted peer"),
     "jump_margin": Param(
         _CONTROL.jump_margin, "[rad] slack of the test flagging states faster than opt.d_max"
     ),
     "allow_unmodelled": Param(False, "accept peers in reach that no pair model covers"),
+    "autostart": Param(True, "configure and activate at start (false: a lifecycle manager does)"),
     "fault_injection": Param("", "tests only: raise | solver_raise | hang | slow; '' = off"),
 }
 """The node's own parameters; the planner's settings follow (:func:`planner_params`)."""
@@ -138,14 +139,9 @@ def planner_params() -> dict[str, Param]:
 
 PLANNER_PARAMS = planner_params()
 PARAMS: dict[str, Param] = {**NODE_PARAMS, **PLANNER_PARAMS}
-#: Seconds between two WARN lines of one cause.
-WARN_EVERY = 2.0
 #: History of the command and status publishers (reliable, keep last): 2 s at 25 Hz, so a
 #: recorder that stalls for up to 2 s (CPU starved) loses nothing.
 HISTORY = 50
-#: Ticks between two statuses on ``/diagnostics`` while all is OK (1 Hz at 25 Hz); a WARN or
-#: ERROR status goes out at once.
-DIAGNOSTICS_EVERY = 25
 
 
 def _typed(value: object) -> object:
@@ -155,17 +151,15 @@ def _typed(value: object) -> object:
     return tuple(float(v) for v in value)  # type: ignore[attr-defined]
 
 
-def _level(decision: Decision) -> int:
-    levels = log_msgs.DiagnosticStatus
-    if decision.error or decision.status in ("no_own_state", "non_finite_command"):
-        return int(levels.ERROR)
-    if decision.fail_safe or decision.hold or decision.stale or decision.untrusted:
-        return int(levels.WARN)
-    return int(levels.OK)
-
-
-class ArmPlannerNode(Node):
+class ArmPlannerNode(PlannerReports, LifecycleNode):
     """The node: parameters → planner → controller; timer, subscriptions, publishers.
+
+    A managed (lifecycle) node: *configure* checks the parameters and the cell, loads and
+    compiles the models and creates the topics, services and the action; *activate* starts the
+    command timer; *deactivate* stops it after one zero command; *cleanup* and *shutdown*
+    release everything. Unconfigured or inactive, it publishes no command. With ``autostart``
+    (the default) it configures and activates itself at start, and a bad parameter stops it
+    with one line, as a plain node.
 
     It spins in a single-threaded executor; the solve runs in the controller's own thread
     (:class:`~nehmo_ros.control.SolveWorker`), so the 25 Hz timer never waits on it. (rclpy's
@@ -185,7 +179,72 @@ class ArmPlannerNode(Node):
                 **{old: f"no longer exists: {why}" for old, why in REMOVED.items()},
             },
         )
-        p = declare_parameters(self, PARAMS)
+        autostart = declare_parameters(self, PARAMS)["autostart"]
+        self.configured = False
+        self.timer: Any = None  # the command timer while active
+        self._last_publish: float | None = None
+        if autostart:
+            self._configure()  # errors stop the node with one line
+            self.trigger_configure()
+            self.trigger_activate()
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    def on_configure(self, state: Any) -> TransitionCallbackReturn:
+        if not self.configured:
+            try:
+                self._configure()
+            except NODE_ERRORS as err:
+                self.get_logger().error(f"configure failed: {err}")
+                return TransitionCallbackReturn.FAILURE
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: Any) -> TransitionCallbackReturn:
+        self._ready, self._last_publish = False, None
+        self.timer = self.create_timer(self.period, self._on_tick)
+        self.get_logger().info("active: commanding")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_deactivate(self, state: Any) -> TransitionCallbackReturn:
+        self._stop_commands()
+        self.get_logger().info("inactive: one zero command, then none")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_cleanup(self, state: Any) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: Any) -> TransitionCallbackReturn:
+        self._stop_commands()
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _stop_commands(self) -> None:
+        if self.timer is not None:
+            self.destroy_timer(self.timer)
+            self.timer = None
+            self.command_pub.publish(Float64MultiArray(data=[0.0] * self.robot.dof))
+            self.published["commands"] += 1
+
+    def _release(self) -> None:
+        """Stop the worker, drop the models and every topic, service and the action."""
+        if not self.configured:
+            return
+        self.controller.stop()
+        self.goals.destroy()
+        for entity in self._entities:
+            for kind in ("publisher", "subscription", "service"):
+                if type(entity).__name__.lower() == kind:
+                    getattr(self, f"destroy_{kind}")(entity)
+        self.configured = False
+        self.get_logger().info("cleaned up: models and topics released")
+
+    def _owned(self) -> list[Any]:
+        return [*self.publishers, *self.subscriptions, *self.services]
+
+    def _configure(self) -> None:
+        """Everything but the timer: parameters, cell, planner, topics, services, action."""
+        p = {name: self.get_parameter(name).value for name in PARAMS}
+        before = self._owned()
         self.cell = load_cell_parameter(p["cell"])
         arm_id = require_text("arm_id", p["arm_id"], f"one of the cell's arms {self.cell.arm_ids}")
         if arm_id not in self.cell.arm_ids:
@@ -233,7 +292,6 @@ class ArmPlannerNode(Node):
         self.controller = ArmController(self.cell, arm_id, planner, control)
         self.robot = self.cell.arm(arm_id).robot
         self.kind = p["planner"]
-        self._last_publish: float | None = None
         self._ready = False
         self._diagnostics_due = 0
         #: Messages published and joint states received (printed at the stop, for load tests).
@@ -255,9 +313,12 @@ class ArmPlannerNode(Node):
                 self._state_callback(other),
                 qos_profile_sensor_data,
             )
-        self.create_subscription(JointState, goal_topic(arm_id), self._on_goal, LATCHED)
+        self.goals = GoalKeeper(self, self.controller, arm_id)  # the topic's and the action's
+        self.create_subscription(JointState, goal_topic(arm_id), self.goals.on_topic, LATCHED)
         self.pause_services = PauseServices(self, self.controller, arm_id)
-        self.timer = self.create_timer(control.period, self._on_tick)
+        self.period = control.period
+        self._entities = [e for e in self._owned() if e not in before]
+        self.configured = True
         self.get_logger().info(
             f"arm {arm_id} of cell {self.cell.name}: planner {p['planner']} (model "
             f"{p['model']}), {rate:g} Hz, deadline {deadline * 1e3:.1f} ms, peers "
@@ -304,18 +365,6 @@ class ArmPlannerNode(Node):
                 f"speed bound of {arm_id} rejected: {err}", throttle_duration_sec=WARN_EVERY
             )
 
-    def _on_goal(self, msg: Any) -> None:
-        try:
-            goal = self.controller.set_goal(msg.name, msg.position)
-        except Exception as err:  # InvalidValueError, or a malformed message
-            self.get_logger().error(
-                f"rejected goal: {err}; keeping the previous goal", throttle_duration_sec=WARN_EVERY
-            )
-            return
-        self.get_logger().info(
-            f"goal {[round(float(x), 3) for x in goal]}", throttle_duration_sec=5.0
-        )
-
     def _on_tick(self) -> None:
         try:
             self._tick()
@@ -331,6 +380,7 @@ class ArmPlannerNode(Node):
         now = time.monotonic()
         stamp_ns = self.get_clock().now().nanoseconds
         decision = self.controller.tick(now, stamp_ns)
+        self.goals.on_tick(decision)
         if not self._ready:
             if not decision.ready:  # nothing to command yet: the bridge's watchdog holds the arm
                 self.get_logger().info(f"waiting ({decision.status})", throttle_duration_sec=2.0)
@@ -350,82 +400,15 @@ class ArmPlannerNode(Node):
         self._publish_diagnostics(status, stamp_ns)
         self._report(decision)
 
-    def _publish_diagnostics(self, status: Any, stamp_ns: int) -> None:
-        """The status on ``/diagnostics`` too, at most every ``DIAGNOSTICS_EVERY`` ticks."""
-        self._diagnostics_due -= 1
-        if self._diagnostics_due > 0 and int(status.level) == 0:
-            return
-        self._diagnostics_due = DIAGNOSTICS_EVERY
-        array = log_msgs.DiagnosticArray(
-            header=log_msgs.Header(stamp=stamp(stamp_ns)), status=[status]
-        )
-        self.diagnostics_pub.publish(log_msgs.serialize(array))
-
-    def _report(self, d: Decision) -> None:
-        """WARN lines for faults, at most one per cause every ``WARN_EVERY`` s."""
-        log, c = self.get_logger(), self.controller.counters
-        if d.error or d.status.startswith("failed"):
-            log.warning(
-                f"solver failed ({d.error or d.status}); commanding "
-                f"{'zero velocity' if d.hold else 'the fail-safe'} ({c.solver_errors} failures "
-                f"in {c.ticks} ticks)",
-                throttle_duration_sec=WARN_EVERY,
-            )
-        elif d.status == "deadline_missed":
-            log.warning(
-                f"solve of tick {d.tick} missed its deadline; commanding "
-                f"{'zero velocity' if d.hold else 'the fail-safe'} ({c.deadline_misses} misses "
-                f"in {c.ticks} ticks)",
-                throttle_duration_sec=WARN_EVERY,
-            )
-        if d.stale or d.untrusted:
-            action = "zero velocity" if d.hold else "the fail-safe"
-            log.warning(
-                f"peers stale {list(d.stale)} / untrusted {list(d.untrusted)}: commanding {action}",
-                throttle_duration_sec=WARN_EVERY,
-            )
-        if d.status == "own_state_untrusted":
-            log.warning(
-                "own joint states rejected or jumping: holding still",
-                throttle_duration_sec=WARN_EVERY,
-            )
-
-    def _status(self, d: Decision, period: float, wall_ns: int) -> Any:
-        """The evaluation's status message (telemetry) plus the node's own counters."""
-        msg = status_message(self.arm_id, self.kind, self.controller.telemetry(d), d.observation_ns)
-        c = self.controller.counters
-        extra: dict[str, object] = {
-            "hold": str(d.hold).lower(),
-            "stale_peers": ",".join(d.stale),
-            "missing_peers": ",".join(d.missing),
-            "untrusted_peers": ",".join(d.untrusted),
-            "error": d.error,
-            "ticks": c.ticks,
-            "deadline_misses": c.deadline_misses,
-            "fail_safes": c.fail_safes,
-            "holds": c.holds,
-            "solver_errors": c.solver_errors,
-            "rejected_states": sum(self.controller.states.rejected.values()),
-            "state_jumps": sum(self.controller.states.jumps.values()),
-            "period": repr(period),
-            "publish_wall_ns": wall_ns,
-            "command": ",".join(repr(float(u)) for u in d.velocity),
-            "late_solve_time": repr(float(d.late_solve_time)),
-            "late_solve_tick": d.late_tick,
-        }
-        if self.fault:
-            extra["fault_injection"] = self.fault
-        # the state ages of the observation this command was computed from
-        extra.update({f"age_{a}": f"{age:.4f}" for a, age in d.ages.items()})
-        msg.level = _level(d)
-        msg.values += [log_msgs.KeyValue(key=k, value=str(v)) for k, v in extra.items()]
-        return msg
-
     def on_stop(self) -> None:
-        """Command a stop once (if the middleware is still up) and end the worker thread."""
-        self.timer.cancel()
+        """Active: command a stop once (if the middleware is still up); end the worker thread."""
+        if not self.configured:
+            print("arm_planner: stopped (unconfigured)", flush=True)
+            return
+        if self.timer is not None:
+            self.timer.cancel()
         self.controller.stop()
-        if rclpy.ok():
+        if rclpy.ok() and self.timer is not None:
             self.command_pub.publish(Float64MultiArray(data=[0.0] * self.robot.dof))
             self.published["commands"] += 1
         c = self.controller.counters
