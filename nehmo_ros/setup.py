@@ -26,6 +26,7 @@ setup(
         "console_scripts": [
             "arm_planner = nehmo_ros.arm_planner:main",
             "command_watchdog = nehmo_ros.command_watchdog:main",
+            "lifecycle_manager = nehmo_ros.lifecycle_manager:main",
             "recorder = nehmo_ros.recorder:main",
             "orchestrate = nehmo_ros.orchestrate:main",
         ],

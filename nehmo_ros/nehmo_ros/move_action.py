@@ -4,7 +4,8 @@ and the ``/<id>/goal`` topic, one code path (:meth:`GoalKeeper.apply`).
 A goal on either path replaces the one before: an action goal still running ends ``ABORTED``
 ("preempted"). Feedback is sent every planner tick: the largest joint error, the smallest ``V``
 and its peer, and the mode (``planning``, ``fail_safe``, ``escaping``, ``evading``, ``holding``,
-``waiting``). A goal ends ``REACHED`` when every joint is within its tolerance at once,
+``waiting``). A goal ends ``REACHED`` when the joint error's norm (L2, continuous joints
+wrapped: the evaluation's success rule) is within its tolerance,
 ``TIMED_OUT`` after its time limit, ``CANCELED`` on cancel: the arm then holds with zero commands
 until the next goal (on either path) or ``/planner/resume``.
 
@@ -131,7 +132,7 @@ class GoalKeeper:
             return
         got = self.controller.states.get(self.arm_id)
         if got is not None:
-            active.error = float(np.abs(goal_error(got[0], active.goal, self.robot)).max())
+            active.error = float(np.linalg.norm(goal_error(got[0], active.goal, self.robot)))
         telemetry = decision.telemetry
         min_value = math.inf if telemetry is None else float(telemetry.min_value)
         peer = "" if telemetry is None else telemetry.critical_peer or ""

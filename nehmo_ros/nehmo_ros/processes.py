@@ -101,6 +101,7 @@ class Process:
 EXECUTABLES: dict[str, tuple[str, str]] = {
     "nehmo_ros.arm_planner": ("nehmo_ros", "arm_planner"),
     "nehmo_ros.command_watchdog": ("nehmo_ros", "command_watchdog"),
+    "nehmo_ros.lifecycle_manager": ("nehmo_ros", "lifecycle_manager"),
     "nehmo_ros.recorder": ("nehmo_ros", "recorder"),
     "sim_bridge.bridge": ("sim_bridge", "sim_bridge"),
 }

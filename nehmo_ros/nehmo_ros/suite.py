@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -142,11 +143,32 @@ def run_episode(
                 f"planner_{arm_id}",
                 node_command(
                     "nehmo_ros.arm_planner",
-                    {**params, **sim},
+                    {**params, **sim, "autostart": False},
                     ["-r", f"__node:=arm_planner_{arm_id}", *settings.extra_planner_args],
                     settings.install_space,
                 ),
             )
+        # the planners start unconfigured; the lifecycle manager configures, then activates them
+        manager_argv = node_command(
+            "nehmo_ros.lifecycle_manager",
+            {
+                "node_names": [f"arm_planner_{a}" for a in kinds],
+                "timeout": settings.startup_timeout,
+            },
+            install_space=settings.install_space,
+        )
+        commands["lifecycle_manager"] = manager_argv
+        manager = Process("lifecycle_manager", manager_argv, env, logs / "lifecycle_manager.log", 0)
+        try:
+            manager_code: int | None = manager.proc.wait(settings.startup_timeout * 2 + 30)
+        except subprocess.TimeoutExpired:
+            manager_code = manager.stop(settings.stop_timeout)
+        if manager_code != 0:
+            reason = f"the planners did not come up: {error_line(manager.output())}"
+            for p in procs:
+                codes[p.name] = p.stop(settings.stop_timeout)
+            wall = time.monotonic() - start
+            return EpisodeRun(episode, log_path, EpisodeResult.failed(reason, kinds), codes, wall)
         bridge = launch(
             "sim_bridge",
             node_command(

@@ -3,10 +3,13 @@ runs them: source ``install/setup.bash``, then ``install/<pkg>/lib/<pkg>/<execut
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import signal
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import pytest
@@ -40,6 +43,72 @@ def test_sourced_setup_imports_the_installed_packages(colcon_install: Path) -> N
     )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip().startswith(str(colcon_install / "nehmo_ros")), proc.stdout
+
+
+MOVE_ARM_ROUND_TRIP = textwrap.dedent(
+    """
+    import json
+    import rclpy
+    from rclpy.action import ActionClient, ActionServer
+    from rclpy.executors import SingleThreadedExecutor
+    from nehmo_interfaces.action import MoveArm
+
+    def execute(goal_handle):
+        goal = goal_handle.request
+        feedback = MoveArm.Feedback(goal_error=0.25, min_value=float("inf"), mode="planning")
+        goal_handle.publish_feedback(feedback)
+        goal_handle.succeed()
+        error = max(abs(x) for x in goal.position)
+        return MoveArm.Result(code=MoveArm.Result.REACHED, message=",".join(goal.name),
+                              goal_error=error, elapsed=goal.time_limit)
+
+    rclpy.init()
+    node = rclpy.create_node("move_arm_round_trip")
+    server = ActionServer(node, MoveArm, "move_arm", execute)
+    client = ActionClient(node, MoveArm, "move_arm")
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    assert client.wait_for_server(timeout_sec=30.0), "no move_arm server"
+    feedbacks = []
+    goal = MoveArm.Goal(name=["j1", "j2"], position=[0.1, -0.3], tolerance=0.05, time_limit=2.0)
+    sent = client.send_goal_async(goal, feedback_callback=lambda m: feedbacks.append(m.feedback))
+    executor.spin_until_future_complete(sent, timeout_sec=30.0)
+    assert sent.done() and sent.result().accepted, "goal not accepted"
+    result = sent.result().get_result_async()
+    executor.spin_until_future_complete(result, timeout_sec=30.0)
+    assert result.done(), "no result"
+    for _ in range(100):  # the feedback may arrive just after the result
+        if feedbacks:
+            break
+        executor.spin_once(timeout_sec=0.1)
+    r = result.result().result
+    print(json.dumps({
+        "feedback": [[f.mode, f.goal_error, f.min_value] for f in feedbacks],
+        "reached": r.code == MoveArm.Result.REACHED,
+        "result": [r.code, r.message, r.goal_error, r.elapsed],
+    }))
+    node.destroy_node()
+    rclpy.shutdown()
+    """
+)
+
+
+def test_the_interface_package_builds_and_its_action_runs(
+    colcon_install: Path, tmp_path: Path
+) -> None:
+    """``nehmo_interfaces`` (ament_cmake, rosidl) builds with the rest of the workspace, and a
+    process that imports only rclpy and it serves and calls ``MoveArm``: goal, feedback,
+    result."""
+    share = colcon_install / "nehmo_interfaces" / "share" / "nehmo_interfaces"
+    assert (share / "action" / "MoveArm.action").is_file()
+    script = tmp_path / "move_arm_round_trip.py"
+    script.write_text(MOVE_ARM_ROUND_TRIP)
+    proc = _in_install_space(colcon_install, f'python "{script}"')
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["feedback"] == [["planning", 0.25, math.inf]], out
+    assert out["reached"] is True, out
+    assert out["result"] == [1, "j1,j2", 0.3, 2.0], out
 
 
 def test_an_installed_node_rejects_a_bad_parameter_with_one_line(colcon_install: Path) -> None:

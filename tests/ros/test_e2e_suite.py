@@ -78,12 +78,19 @@ def test_the_nodes_ran_from_the_install_space(suite: Any, colcon_install: Path) 
     assert run.rmw == "rmw_fastrtps_cpp"
     logs = run.log.parent / "logs" / run.log.name
     commands = json.loads((logs / "commands.json").read_text())
-    assert set(commands) == {"recorder", "planner_ur5_0", "planner_ur5_1", "sim_bridge"}
+    expected = {"recorder", "planner_ur5_0", "planner_ur5_1", "lifecycle_manager", "sim_bridge"}
+    assert set(commands) == expected
     for name, argv in commands.items():
         assert argv[0] == "bash" and f'source "{colcon_install}/setup.bash"' in argv[2], name
         package = "sim_bridge" if name == "sim_bridge" else "nehmo_ros"
         assert f"{colcon_install}/{package}/lib/{package}/" in argv[2], name
     assert "episode started" in (logs / "sim_bridge.log").read_text()
+    # the planners started unconfigured and were brought up by the lifecycle manager
+    assert all("autostart:=false" in commands[f"planner_{a}"] for a in ("ur5_0", "ur5_1"))
+    managed = (logs / "lifecycle_manager.log").read_text()
+    for arm_id in ("ur5_0", "ur5_1"):
+        assert f"arm_planner_{arm_id}: configured" in managed
+        assert f"arm_planner_{arm_id}: activated" in managed
 
 
 @pytest.fixture(scope="module")
