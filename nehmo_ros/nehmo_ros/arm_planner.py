@@ -71,7 +71,8 @@ from nehmo_core.logs.topics import (
 from nehmo_core.planning.settings import REMOVED, RENAMED, PlannerSettings
 from nehmo_ros.control import ArmController, ControlSettings
 from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
-from nehmo_ros.move_action import GoalKeeper
+from nehmo_ros.markers import MarkerPublisher
+from nehmo_ros.move_action import GoalKeeper, decision_mode
 from nehmo_ros.node_support import (
     NODE_ERRORS,
     Param,
@@ -142,6 +143,11 @@ PARAMS: dict[str, Param] = {**NODE_PARAMS, **PLANNER_PARAMS}
 #: History of the command and status publishers (reliable, keep last): 2 s at 25 Hz, so a
 #: recorder that stalls for up to 2 s (CPU starved) loses nothing.
 HISTORY = 50
+
+
+def _epsilon(planner: Any) -> float:
+    """The margin ε [m] the planner keeps (raised by certified margins)."""
+    return float(getattr(getattr(planner, "settings", None), "opt", PlannerSettings().opt).epsilon)
 
 
 def _typed(value: object) -> object:
@@ -314,6 +320,7 @@ class ArmPlannerNode(PlannerReports, LifecycleNode):
                 qos_profile_sensor_data,
             )
         self.goals = GoalKeeper(self, self.controller, arm_id)  # the topic's and the action's
+        self.markers = MarkerPublisher(self, self.controller, arm_id, _epsilon(planner), rate)
         self.create_subscription(JointState, goal_topic(arm_id), self.goals.on_topic, LATCHED)
         self.pause_services = PauseServices(self, self.controller, arm_id)
         self.period = control.period
@@ -381,6 +388,7 @@ class ArmPlannerNode(PlannerReports, LifecycleNode):
         stamp_ns = self.get_clock().now().nanoseconds
         decision = self.controller.tick(now, stamp_ns)
         self.goals.on_tick(decision)
+        self.markers.on_tick(decision, decision_mode(decision, self.controller.paused))
         if not self._ready:
             if not decision.ready:  # nothing to command yet: the bridge's watchdog holds the arm
                 self.get_logger().info(f"waiting ({decision.status})", throttle_duration_sec=2.0)

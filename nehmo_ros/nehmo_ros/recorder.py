@@ -3,7 +3,7 @@
     install/nehmo_ros/lib/nehmo_ros/recorder --ros-args -p cell:=dual_ur5 -p output:=run_bag
 
 It records every topic of the NeHMO schema for the cell's arms (:func:`nehmo_core.logs.topics
-.run_topics`: joint states, commands, goals, planner status per arm; ``/clock``,
+.ros_topics`: joint states, commands, goals, planner status and markers per arm; ``/clock``,
 ``/nehmo/collisions``, ``/nehmo/scenario``). Subscriptions are raw (``raw=True``): the bag holds
 the serialized bytes as they arrived, written by :class:`nehmo_core.logs.LogWriter` (the writer
 of the batch runs), so ``nehmo_core.eval`` evaluates a ROS run like a batch one, and
@@ -48,7 +48,7 @@ from nehmo_core.logs.topics import (
     COLLISIONS_TYPE,
     JOINT_STATE_TYPE,
     SCENARIO_TOPIC,
-    run_topics,
+    ros_topics,
     split_arm_topic,
 )
 from nehmo_core.logs.writer import LogWriter, QosDescription, WriterSettings
@@ -127,7 +127,7 @@ class RecorderNode(Node):
             ) from None
         self.path = path
         self.lost = 0
-        self.topics = run_topics(list(self.cell.arm_ids))
+        self.topics = ros_topics(list(self.cell.arm_ids))
         for topic, msgtype in self.topics.items():
             latched = is_latched(topic)
             self.writer.add_topic(

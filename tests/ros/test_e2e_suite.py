@@ -16,6 +16,7 @@ the lock-step batch run never sees).
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -170,3 +171,27 @@ def test_a_plain_rclpy_node_receives_states_commands_and_diagnostics(suite: Any)
     assert {"ur5_0/planner", "ur5_1/planner"} <= {n for d in diagnostics for n in d["status"]}
     bounds = [b["data"] for b in by_topic.get("/ur5_0/planner/speed_bound", [])]
     assert len(bounds) > 10 and all(0.0 <= b <= 1.0 for b in bounds)
+
+
+def test_the_bag_holds_each_planners_markers(suite: Any) -> None:
+    from nehmo_core.logs.reader import read_log
+
+    run, _ = suite
+    for arm_id in ("ur5_0", "ur5_1"):
+        records = read_log(run.log, topics=[f"/{arm_id}/planner/markers"])
+        assert len(records) >= 5, arm_id  # about 5 Hz over the episode
+        lines = 0
+        for record in records:
+            markers = record.message.markers
+            assert [(m.ns, m.id) for m in markers] == [(f"nehmo/{arm_id}", k) for k in range(3)]
+            assert all(m.header.frame_id == "world" for m in markers)
+            line, goal, text = markers
+            assert text.text.startswith(f"{arm_id}: ")
+            assert goal.type == 2 and goal.action == 0  # a sphere at the goal's tip
+            if line.action == 0:  # the critical pair's closest link origins, coloured by V
+                lines += 1
+                assert line.type == 5 and len(line.points) == 2
+                assert (line.color.r, line.color.g) != (0.0, 0.0)
+        assert lines >= 1, arm_id  # the peer is in reach: the line is drawn
+        values = read_log(run.log, topics=[f"/{arm_id}/planner/min_value"])
+        assert len(values) >= 5 and any(math.isfinite(r.message.data) for r in values)

@@ -15,6 +15,11 @@ topic                                            type
 ``planner/speed_bound`` is the speed bound the arm announces with each command, a fraction of
 its top speed (1: none; see :mod:`nehmo_core.planning.stages.speed_bounds`).
 
+A ROS run's bag also holds ``/<arm_id>/planner/markers`` (visualization_msgs/msg/MarkerArray,
+what a planner node shows RViz and Foxglove) and ``/<arm_id>/planner/min_value``
+(std_msgs/msg/Float64, the smallest V [m], to plot), both at about 5 Hz (:func:`ros_topics`);
+batch runs write neither.
+
 Run-wide: ``/clock`` (rosgraph_msgs/msg/Clock), ``/nehmo/collisions``
 (diagnostic_msgs/msg/DiagnosticArray, one status per colliding pair, published by the simulator)
 and ``/nehmo/scenario`` (std_msgs/msg/String holding the scenario as JSON).
@@ -37,6 +42,7 @@ COLLISIONS_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 SCENARIO_TYPE = "std_msgs/msg/String"
 SPEED_BOUND_TYPE = "std_msgs/msg/Float64"
+MARKERS_TYPE = "visualization_msgs/msg/MarkerArray"
 
 _ARM_ID = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -101,6 +107,23 @@ def run_topics(arm_ids: list[str]) -> dict[str, str]:
     for arm_id in arm_ids:
         topics.update(arm_topics(arm_id))
     return topics
+
+
+def markers_topic(arm_id: str) -> str:
+    """A ROS planner's markers for RViz / Foxglove."""
+    return f"/{check_arm_id(arm_id)}/planner/markers"
+
+
+def min_value_topic(arm_id: str) -> str:
+    """A ROS planner's smallest V [m], for plots."""
+    return f"/{check_arm_id(arm_id)}/planner/min_value"
+
+
+def ros_topics(arm_ids: list[str]) -> dict[str, str]:
+    """:func:`run_topics` and what only the ROS nodes publish (the planners' markers and V)."""
+    extra = {markers_topic(a): MARKERS_TYPE for a in arm_ids}
+    extra.update({min_value_topic(a): SPEED_BOUND_TYPE for a in arm_ids})
+    return {**run_topics(arm_ids), **extra}
 
 
 def split_arm_topic(topic: str) -> tuple[str, str] | None:
