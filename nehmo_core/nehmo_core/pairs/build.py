@@ -359,6 +359,7 @@ class PairBuild:
             "distance-certificate", self.pair,
             "--samples", str(self.budget.certificate_samples),
             "--seed", str(self.seed + 3003), "--alpha", str(self.budget.alpha),
+            "--pool", str(self.work / "data" / "test.npz"),
         ]  # fmt: skip
         cert = self._python("distance certificate", args)
         card_path = self._distance_card()

@@ -46,28 +46,47 @@ def mirror_check(pair: str, samples: int, seed: int) -> dict[str, Any]:
     }
 
 
-def distance_certificate(pair: str, samples: int, seed: int, alpha: float) -> dict[str, Any]:
-    """:func:`~nehmo_core.verify.distance.certify_distance` over uniform exact contact states."""
+def distance_certificate(
+    pair: str, samples: int, seed: int, alpha: float, pool: str = ""
+) -> dict[str, Any]:
+    """:func:`~nehmo_core.verify.distance.certify_distance` over uniform exact contact states.
+
+    Where contact is too rare among uniform states to draw ``samples`` of them (a pair's far base
+    distances: a few in a million), and a ``pool`` of labelled states (``q``, ``d``: a held-out
+    label set) is given, the certificate is made on contact states near that pool's contacts
+    instead (each a pool state with ``|d| < 5 cm``, joints moved by ``N(0, σ²)``,
+    ``σ ~ U[0.02, 0.1]`` rad) and says so (``distribution``: ``near_visited``).
+    """
+    from nehmo_core.errors import NehmoError
     from nehmo_core.geometry.distance_model import load_distance_model
     from nehmo_core.hjr.systems import make_system
-    from nehmo_core.verify.distance import certify_distance
-    from nehmo_core.verify.distributions import UniformBox
+    from nehmo_core.verify.distance import NearVisited, certify_distance
+    from nehmo_core.verify.distributions import UniformBox, VisitedStates
     from nehmo_core.verify.truth import exact_margin
 
     system = make_system(pair)
     margin = exact_margin(system)
+    model = load_distance_model(pair)
+    rng = np.random.default_rng(seed)
+    fallback = ""
     try:
-        cert = certify_distance(
-            load_distance_model(pair),
-            margin,
-            UniformBox(system),
-            np.random.default_rng(seed),
-            samples=samples,
-            alpha=alpha,
-        )
+        try:
+            cert = certify_distance(model, margin, UniformBox(system), rng, samples, alpha)
+        except NehmoError as err:
+            if not pool or "in contact" not in str(err):
+                raise
+            fallback = f"uniform states: {err}"
+            data = np.load(pool)
+            near = data["q"][np.abs(data["d"]) < 0.05]
+            joints = system.state_dim - len(getattr(system, "conditions", ()))
+            distribution = NearVisited(VisitedStates(near, (pool,)), joints, 0.02, 0.1)
+            cert = certify_distance(model, margin, distribution, rng, samples, alpha)
     finally:
         margin.close()
-    return {**cert.to_dict(), "seed": seed}
+    out = {**cert.to_dict(), "seed": seed}
+    if fallback:
+        out["fallback"] = fallback
+    return out
 
 
 def falsify(
@@ -150,6 +169,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.add_argument("--samples", type=int, required=True)
         p.add_argument("--seed", type=int, required=True)
     d.add_argument("--alpha", type=float, required=True)
+    d.add_argument("--pool", default="", help="labelled states (npz: q, d) for rare contact")
     f.add_argument("--variant", required=True)
     f.add_argument("--cluster", default="local", help="where the rollouts run (docs/cluster.md)")
     v.add_argument("--variant", required=True)
@@ -157,7 +177,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.kind == "mirror":
         result = mirror_check(args.pair, args.samples, args.seed)
     elif args.kind == "distance-certificate":
-        result = distance_certificate(args.pair, args.samples, args.seed, args.alpha)
+        result = distance_certificate(args.pair, args.samples, args.seed, args.alpha, args.pool)
     elif args.kind == "value-check":
         result = value_check(args.pair, args.variant, args.samples, args.seed)
     else:
