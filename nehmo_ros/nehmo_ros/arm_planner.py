@@ -85,6 +85,7 @@ from nehmo_ros.node_support import (
 from nehmo_ros.pause import PauseServices
 from nehmo_ros.planner_report import WARN_EVERY, PlannerReports
 from nehmo_ros.planners import build_planner, warm_up
+from nehmo_ros.state_intake import StateIntake
 
 #: Goals and the scenario are latched (transient local): a late subscriber still gets them.
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -157,7 +158,7 @@ def _typed(value: object) -> object:
     return tuple(float(v) for v in value)  # type: ignore[attr-defined]
 
 
-class ArmPlannerNode(PlannerReports, LifecycleNode):
+class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
     """The node: parameters → planner → controller; timer, subscriptions, publishers.
 
     A managed (lifecycle) node: *configure* checks the parameters and the cell, loads and
@@ -312,12 +313,14 @@ class ArmPlannerNode(PlannerReports, LifecycleNode):
             self.create_subscription(
                 Float64, speed_bound_topic(other), self._bound_callback(other), HISTORY
             )
-        for other in self.cell.arm_ids:
+        self._latest: dict[str, tuple[bytes, float]] = {}  # arm → newest raw state, received
+        for other in self.cell.arm_ids:  # raw: only the newest state per tick is decoded
             self.create_subscription(
                 JointState,
                 joint_states_topic(other),
                 self._state_callback(other),
                 qos_profile_sensor_data,
+                raw=True,
             )
         self.goals = GoalKeeper(self, self.controller, arm_id)  # the topic's and the action's
         self.markers = MarkerPublisher(self, self.controller, arm_id, _epsilon(planner), rate)
@@ -333,34 +336,6 @@ class ArmPlannerNode(PlannerReports, LifecycleNode):
         )
 
     # -- callbacks ----------------------------------------------------------------------------
-    def _state_callback(self, arm_id: str) -> Callable[[Any], None]:
-        return lambda msg: self._on_state(arm_id, msg)
-
-    def _on_state(self, arm_id: str, msg: Any) -> None:
-        now = time.monotonic()
-        self.received[arm_id] += 1
-        try:
-            stamp = msg.header.stamp
-            stamp_ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-            note = self.controller.update_state(arm_id, msg.name, msg.position, now, stamp_ns)
-        except Exception as err:  # a malformed message never takes the node down
-            note = f"rejected: {type(err).__name__}: {err}"
-        if note is None:
-            return
-        untrusted = f"; {arm_id} untrusted for {self.controller.settings.peer_timeout:g} s"
-        if note.startswith("rejected"):
-            self.get_logger().warning(
-                f"joint state of {arm_id} {note} ({self.controller.states.rejected[arm_id]} "
-                f"rejected){untrusted}",
-                throttle_duration_sec=WARN_EVERY,
-            )
-        else:
-            self.get_logger().warning(
-                f"joint state of {arm_id} {note} ({self.controller.states.jumps[arm_id]} jumps)"
-                f"{untrusted}",
-                throttle_duration_sec=WARN_EVERY,
-            )
-
     def _bound_callback(self, arm_id: str) -> Callable[[Any], None]:
         return lambda msg: self._on_bound(arm_id, msg)
 
@@ -386,6 +361,7 @@ class ArmPlannerNode(PlannerReports, LifecycleNode):
     def _tick(self) -> None:
         now = time.monotonic()
         stamp_ns = self.get_clock().now().nanoseconds
+        self._read_states()
         decision = self.controller.tick(now, stamp_ns)
         self.goals.on_tick(decision)
         self.markers.on_tick(decision, decision_mode(decision, self.controller.paused))

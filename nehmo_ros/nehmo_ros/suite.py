@@ -165,6 +165,10 @@ def run_episode(
             manager_code = manager.stop(settings.stop_timeout)
         if manager_code != 0:
             reason = f"the planners did not come up: {error_line(manager.output())}"
+            for p in procs:  # the planner's own reason
+                said = [ln for ln in p.output().splitlines() if "configure failed: " in ln]
+                if said:
+                    reason += f"; {p.name}: {said[-1].split('configure failed: ', 1)[1]}"
             for p in procs:
                 codes[p.name] = p.stop(settings.stop_timeout)
             wall = time.monotonic() - start

@@ -120,11 +120,13 @@ def test_malformed_messages_are_counted_per_topic(flooded: Any) -> None:
 
 def test_a_node_failing_at_start_up_stops_the_episode_with_its_reason(tmp_path: Path) -> None:
     cell = tmp_path / "line.yaml"
+    # the bases climb 0.15 m per arm: each pair is in reach, and no shipped model covers
+    # bases at different heights
     cell.write_text(
         "name: line_three_ur5\narms:\n"
         + "".join(
-            f"  - {{id: ur5_{i}, robot: ur5, base: {{xyz: [{0.9 * i:.1f}, 0.0, 0.0]}}}}\n"
-            for i in range(3)
+            f"  - {{id: ur5_{i}, robot: ur5, base: {{xyz: [{x}, 0.0, {z}]}}}}\n"
+            for i, (x, z) in enumerate([(0.0, 0.0), (0.6, 0.15), (1.2, 0.3)])
         )
     )
     out = tmp_path / "demo"
@@ -140,12 +142,12 @@ def test_a_node_failing_at_start_up_stops_the_episode_with_its_reason(tmp_path: 
     assert proc.returncode == 1, proc.stdout + proc.stderr
     # the planner's own error line reaches the terminal
     assert "covers no pair of arm 'ur5_0'" in proc.stdout, proc.stdout
-    assert "exited with status 2 before the episode ended" in proc.stdout, proc.stdout
+    # started unconfigured, the planner fails its configure transition and says why
+    assert "the planners did not come up" in proc.stdout, proc.stdout
+    assert "arm_planner_ur5_0: configure failed" in proc.stdout, proc.stdout
     assert "1 error: " in proc.stdout, proc.stdout
     summary = json.loads((out / "summary.json").read_text())
     (episode,) = summary["episodes"]
     assert episode["outcome"] == "error" and summary["metrics"]["errors"] == 1
-    # stopped when the planner exited: a bridge that gave up waiting for the planners would
-    # have started the episode without them
-    bridge = (out / "logs" / "episode_000" / "sim_bridge.log").read_text()
-    assert "episode started" not in bridge
+    # stopped before the simulation started: the episode never ran without its planners
+    assert not (out / "logs" / "episode_000" / "sim_bridge.log").exists()
