@@ -117,15 +117,15 @@ def test_evaluate_tasks_writes_rows_per_arm_count(tmp_path: Path) -> None:
 
 
 def test_a_task_with_a_pair_no_model_covers_is_skipped_with_its_reason(tmp_path: Path) -> None:
-    """Two UR5s 1.85 m apart are within reach of each other, beyond the conditioned models'
-    base range: the task is skipped by every row with that reason (never a success), and the
-    other tasks still run."""
+    """Two UR5s 1 m apart, one mounted 0.3 m higher, are within reach of each other, and no
+    shipped model covers bases at different heights: the task is skipped by every row with that
+    reason (never a success), and the other tasks still run."""
     tasks = tmp_path / "tasks"
     tasks.mkdir()
     shutil.copy(TASKS / "135003.json", tasks / "135003.json")
     far = json.loads((TASKS / "135011.json").read_text())
     (x, y, z), _ = far["base_poses"][0]
-    old, new = far["base_poses"][1][0], [x, y + 1.85, z]
+    old, new = far["base_poses"][1][0], [x, y + 1.0, z + 0.3]
     far["base_poses"][1][0] = new
     target = far["target_eff_poses"][1]  # the arm's goal pose moves with its base
     target[0] = [t + n - o for t, n, o in zip(target[0], new, old, strict=True)]
@@ -140,7 +140,7 @@ def test_a_task_with_a_pair_no_model_covers_is_skipped_with_its_reason(tmp_path:
     [skipped] = summary["skipped"]
     assert skipped["task"] == "far" and skipped["arms"] == 2
     assert (
-        "no nehmo value model covers the pair ur5_0-ur5_1 (bases 1.85 m apart" in skipped["reason"]
+        "no nehmo value model covers the pair ur5_0-ur5_1 (bases 1.04 m apart" in skipped["reason"]
     )
     for row in summary["rows"]:
         assert row["ours"]["episodes"] == 1  # the one-arm task ran; the skipped one is not counted

@@ -8,9 +8,10 @@ joints, unknown names) and malformed commands on ``/ur5_1/velocity_controller/co
 episode, with the malformed messages it ignored per topic. The count is checked against an
 independent recount of the bag with the MCAP library.
 
-The start-up failure: three UR5s in a line 0.9 m apart, whose end arms (1.8 m apart, within
-reach) no shipped value model covers. Their planners exit at once; the run must stop the
-episode then (not wait out the bridge's start-up timeout) and name the planner's own error line.
+The start-up failure: three UR5s 0.6 m apart whose bases climb 0.15 m per arm: in reach of
+each other, and no shipped value model covers bases at different heights. Their planners fail
+their configure transition; the run must stop the episode then (before the simulation starts)
+and name the planner's own error line.
 """
 
 from __future__ import annotations
