@@ -14,11 +14,13 @@ status message); and the raw status of the first arm.
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
+from nehmo_core.errors import NehmoError
 from nehmo_core.logs.topics import command_topic, markers_topic, min_value_topic, status_topic
 from nehmo_core.robots import load_cell
 
@@ -91,12 +93,19 @@ def layout_text(cell_name: str) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = list(sys.argv[1:] if argv is None else argv)
-    if len(args) != 2:
-        print("usage: python -m nehmo_ros.foxglove_layout CELL OUT.json", file=sys.stderr)
-        return 2
-    with open(args[1], "w") as out:
-        out.write(layout_text(args[0]))
+    parser = argparse.ArgumentParser(
+        prog="python -m nehmo_ros.foxglove_layout",
+        description="Write a Foxglove layout for a cell's arms (import it in Foxglove).",
+    )
+    parser.add_argument("cell", help="shipped cell name (dual_ur5, ...) or a cell YAML path")
+    parser.add_argument("out", type=Path, help="the layout file to write (.json)")
+    args = parser.parse_args(argv)
+    try:
+        text = layout_text(args.cell)
+    except NehmoError as err:
+        parser.error(str(err))
+    args.out.write_text(text)
+    print(f"wrote {args.out}")
     return 0
 
 
