@@ -121,7 +121,8 @@ def write(rows: list[dict[str, Any]], meta: dict[str, Any]) -> None:
         f"{meta['torch']}). The centre UR5 of a ring of k peers at 0.75–1.2 m, all arms running "
         "`nehmo` in closed loop; the centre arm's `plan()` wall time per step.",
         "",
-        "| peers | steps | median ms | p95 ms | max ms | constrained steps | fail-safe | median per peer ms |",
+        "| peers | steps | median ms | p95 ms | max ms | constrained steps | fail-safe "
+        "| median per peer ms |",
         "|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
