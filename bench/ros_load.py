@@ -102,6 +102,23 @@ def rss_mb(pid: int) -> float | None:
     return int(match.group(1)) / 1024.0 if match else None
 
 
+def cpu_seconds(pid: int) -> float | None:
+    """User + system CPU time [s] of ``pid`` so far (None once it has exited)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def cpu_share(samples: list[tuple[float, float]], warmup_s: float) -> float | None:
+    """CPU seconds per wall second of one process after ``warmup_s`` (1.0: one whole core)."""
+    kept = [(t, c) for t, c in samples if t >= warmup_s]
+    if len(kept) < 2 or kept[-1][0] <= kept[0][0]:
+        return None
+    return round((kept[-1][1] - kept[0][1]) / (kept[-1][0] - kept[0][0]), 3)
+
+
 def memory_stats(samples: list[tuple[float, float]], warmup_s: float) -> dict[str, Any]:
     """Growth of one process's RSS: first (after ``warmup_s``) vs last, slope [MB/min]."""
     kept = [(t, m) for t, m in samples if t >= warmup_s] or samples
@@ -195,6 +212,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
         return procs[name]
 
     memory: dict[str, list[tuple[float, float]]] = {}
+    cpu: dict[str, list[tuple[float, float]]] = {}  # (wall s, CPU s) per process
     cycler = None
     started = time.monotonic()
     try:
@@ -226,6 +244,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                 "time_limit": args.duration + 600.0,
                 "stop_on_collision": False,
                 "stop_on_success": False,  # arms at the scenario's goals: the episode runs on
+                "physics_rate": args.physics_rate,  # = the joint-state rate
                 "planners": "nehmo",
                 "min_subscribers": len(cell.arm_ids) + 1,  # every planner and the recorder
             },
@@ -249,6 +268,9 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                     mb = rss_mb(p.proc.pid)
                     if mb is not None:
                         memory.setdefault(name, []).append((now - t0, mb))
+                    used = cpu_seconds(p.proc.pid)
+                    if used is not None:
+                        cpu.setdefault(name, []).append((now - t0, used))
                 next_sample += args.sample_every
             if now >= next_goal:
                 cycler.publish()
@@ -281,6 +303,10 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
             "memory": {
                 name: memory_stats(samples, 0.1 * args.duration)
                 for name, samples in sorted(memory.items())
+            },
+            "physics_rate_hz": args.physics_rate,
+            "cpu_share": {
+                name: cpu_share(samples, 0.1 * args.duration) for name, samples in cpu.items()
             },
         }
     )
@@ -386,7 +412,13 @@ def markdown(r: dict[str, Any]) -> str:
         + "); the bridge"
         " simulated"
         f" {r['bridge_simulated_s']} s (real-time factor {r['bridge_realtime_factor']}: below 1"
-        " the 100 Hz physics did not keep up).",
+        f" the {r.get('physics_rate_hz', 100):g} Hz physics, which is also the joint-state rate,"
+        " did not keep up).",
+        "",
+        "CPU per process (CPU seconds per wall second after the first 10 % of the run; 1.0 is"
+        " one core of two): "
+        + ", ".join(f"{k} {v}" for k, v in sorted(r.get("cpu_share", {}).items()))
+        + f"; total {sum(v for v in r.get('cpu_share', {}).values() if v):.2f}.",
         "",
         "## Command periods and solves",
         "",
@@ -454,8 +486,12 @@ def main() -> int:
     )
     parser.add_argument("--goal-period", type=float, default=8.0, help="[s] between goal flips")
     parser.add_argument("--sample-every", type=float, default=5.0, help="[s] between RSS samples")
+    parser.add_argument(
+        "--physics-rate", type=float, default=100.0, help="[Hz] the bridge's steps and joint states"
+    )
     parser.add_argument("--keep", help="directory for the log and the process outputs")
-    parser.add_argument("--results", default=str(RESULTS), help="where ros_load.{json,md} go")
+    parser.add_argument("--results", default=str(RESULTS), help="where the report goes")
+    parser.add_argument("--name", default="ros_load", help="report name: <results>/<name>.md")
     args = parser.parse_args()
     if not (args.duration > 0 and args.goal_period > 0 and args.sample_every > 0):
         parser.error("--duration, --goal-period and --sample-every must be > 0")
@@ -463,7 +499,7 @@ def main() -> int:
     out.mkdir(parents=True, exist_ok=True)
     result = run(args, out)
     result["machine"] = machine_at_end()
-    print(write_report(Path(args.results), "ros_load", result, markdown))
+    print(write_report(Path(args.results), args.name, result, markdown))
     print(f"log and process outputs: {out}")
     return 0
 
