@@ -197,6 +197,7 @@ def run_main(
             check_ros_arguments(args)
             with _rcl_parse_report_dropped():
                 rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            executor = make_executor()
         except INIT_ERRORS as err:
             print(f"{program}: error: {_describe(err)}", file=sys.stderr, flush=True)
             return 2
@@ -214,7 +215,6 @@ def run_main(
         if threading.current_thread() is threading.main_thread():
             for signum in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(signum, on_signal)
-        executor = SingleThreadedExecutor()
         executor.add_node(node)
         settle_heap()
         try:
@@ -233,6 +233,23 @@ def run_main(
         return 0
     finally:
         rclpy.try_shutdown()
+
+
+EXECUTOR_ENV = "NEHMO_EXECUTOR"
+"""``single`` (default: rclpy's SingleThreadedExecutor) or ``events`` (rclpy's C++
+EventsExecutor, ``rclpy.experimental``): how the nodes spin."""
+
+
+def make_executor() -> Any:
+    """The executor ``NEHMO_EXECUTOR`` names (``single`` when unset)."""
+    kind = os.environ.get(EXECUTOR_ENV, "single").strip() or "single"
+    if kind == "single":
+        return SingleThreadedExecutor()
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    raise ValueError(f"{EXECUTOR_ENV} must be 'single' or 'events'; got {kind!r}")
 
 
 @contextlib.contextmanager
