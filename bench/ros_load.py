@@ -51,6 +51,7 @@ from nehmo_core.logs.writer import remove_bag
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import save_scenario_set
 from nehmo_core.sim.scenarios import generate_scenario_set
+from nehmo_ros.node_support import EXECUTOR_ENV
 from nehmo_ros.processes import Process, child_env, isolated_domain, node_command, reported_rmw
 from nehmo_ros.suite_settings import SuiteSettings
 
@@ -198,6 +199,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
     cell = load_cell(CELL)
     domain = isolated_domain()
     env = child_env(SuiteSettings(model=args.model), domain)
+    env[EXECUTOR_ENV] = args.executor
     scenario_set = generate_scenario_set(cell, 0, 1)
     scenario_file = save_scenario_set(scenario_set, out / "scenarios.json")
     scenario = scenario_set.scenarios[0]
@@ -305,6 +307,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                 for name, samples in sorted(memory.items())
             },
             "physics_rate_hz": args.physics_rate,
+            "executor": args.executor,
             "cpu_share": {
                 name: cpu_share(samples, 0.1 * args.duration) for name, samples in cpu.items()
             },
@@ -413,7 +416,8 @@ def markdown(r: dict[str, Any]) -> str:
         " simulated"
         f" {r['bridge_simulated_s']} s (real-time factor {r['bridge_realtime_factor']}: below 1"
         f" the {r.get('physics_rate_hz', 100):g} Hz physics, which is also the joint-state rate,"
-        " did not keep up).",
+        " did not keep up); executor "
+        f"{r.get('executor', 'single')}.",
         "",
         "CPU per process (CPU seconds per wall second after the first 10 % of the run; 1.0 is"
         " one core of two): "
@@ -488,6 +492,9 @@ def main() -> int:
     parser.add_argument("--sample-every", type=float, default=5.0, help="[s] between RSS samples")
     parser.add_argument(
         "--physics-rate", type=float, default=100.0, help="[Hz] the bridge's steps and joint states"
+    )
+    parser.add_argument(
+        "--executor", default="single", choices=("single", "events"), help="how the nodes spin"
     )
     parser.add_argument("--keep", help="directory for the log and the process outputs")
     parser.add_argument("--results", default=str(RESULTS), help="where the report goes")
