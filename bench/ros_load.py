@@ -51,13 +51,13 @@ from nehmo_core.logs.writer import remove_bag
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import save_scenario_set
 from nehmo_core.sim.scenarios import generate_scenario_set
-from nehmo_ros.node_support import EXECUTOR_ENV
 from nehmo_ros.processes import Process, child_env, isolated_domain, node_command, reported_rmw
 from nehmo_ros.suite_settings import SuiteSettings
 
 RESULTS = Path(__file__).resolve().parent / "results"
 PERIOD_MS, TOLERANCE_MS = 40.0, 5.0
 CELL = "five_ur5"
+EXECUTOR_ENV = "NEHMO_EXECUTOR"  # nehmo_ros.node_support's (read by the nodes)
 
 
 # ------------------------------------------------------------------------------ measurements
