@@ -58,8 +58,35 @@ def _episodes(text: str | None, count: int) -> list[int]:
     return out
 
 
+def task_files(task_path: str, out_dir: Path) -> Path:
+    """A task file (Ha et al.'s format, e.g. from ``nehmo tasks generate``) as a cell YAML and a
+    one-scenario set beside it in ``out_dir``; returns the scenario set's path."""
+    import yaml
+
+    from nehmo_core.eval.ha_tasks import load_task
+    from nehmo_core.sim.scenarios import ScenarioSet
+
+    task = load_task(task_path)
+    arms = [
+        {
+            "id": a.arm_id,
+            "robot": a.robot.name,
+            "base": {"xyz": [float(v) for v in a.base.xyz], "rpy": [float(v) for v in a.base.rpy]},
+        }
+        for a in task.cell.arms
+    ]
+    cell_file = out_dir / f"{task.task_id}.cell.yaml"
+    cell_file.write_text(yaml.safe_dump({"name": task.task_id, "arms": arms}, sort_keys=False))
+    scenarios = ScenarioSet(
+        str(cell_file), 0, (0,), (task.scenario,), 1, {"task": str(Path(task_path).resolve())}
+    )
+    return save_scenario_set(scenarios, out_dir / f"{task.task_id}.scenarios.json").resolve()
+
+
 def scenario_file_for(args: argparse.Namespace, out_dir: Path) -> Path:
-    """The scenario set to run: given, or drawn from ``--seed``/``--count`` and saved."""
+    """The scenario set to run: a task's, given, or drawn from ``--seed``/``--count``."""
+    if getattr(args, "task", None):
+        return task_files(args.task, out_dir)
     if args.scenarios:
         return Path(args.scenarios).resolve()
     scenarios = draw_scenario_set(args.cell, args.seed, args.count)
@@ -72,6 +99,10 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run episodes through the node suite and evaluate them")
     run.add_argument("--cell", default="dual_ur5", help="shipped cell name or YAML path")
     run.add_argument("--scenarios", help="scenario set JSON (default: draw --count from --seed)")
+    run.add_argument(
+        "--task",
+        help="a task file (Ha et al.'s format, nehmo tasks generate): its cell and scenario",
+    )
     run.add_argument("--seed", type=int, default=0)
     run.add_argument("--count", type=int, default=1)
     run.add_argument("--episodes", help="comma-separated episode positions (default: all)")
