@@ -26,10 +26,10 @@ from nehmo_core.geometry.symmetry import robot_mirror_map
 from nehmo_core.robots.registry import MODELS_DIR, arm_pair, robot_facts
 
 PAIRS = list(SHIPPED_DISTANCE_MODELS)
-BELOW_BAR = {"panda_panda_any": 0.035, "ur5_panda_any": 0.035}
+BELOW_BAR = {"panda_panda_any": 0.035, "ur5_panda_any": 0.035, "ur5_ur5_far": 0.025}
 """[m] Mean error near contact of shipped models below the 2 cm bar, held to their own measured
-figure (3.2 and 3.3 cm for the Panda–Panda and UR5–Panda pairs, first builds; README
-Limitations) so they cannot regress."""
+figure (3.2 and 3.3 cm for the Panda–Panda and UR5–Panda pairs, first builds; 2.0–2.2 cm for the
+UR5 pair's far range; README Limitations) so they cannot regress."""
 # pairs whose uniform joint samples include enough contacts for a spot check (the farther UR5
 # pairs touch only when both arms reach toward each other)
 CLOSE_PAIRS = ["ur5_ur5", "ur5_kinova"]

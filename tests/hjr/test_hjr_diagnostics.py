@@ -27,11 +27,13 @@ BELOW_BAR = {
     "panda_panda_any": (0.65, 0.002),
     "ur5_panda_any": (0.55, 0.0015),
     "panda_ur5_any": (0.65, 0.001),
+    "ur5_ur5_far": (0.7, 0.0008),
 }
 """(residual ratio, mean fall at T [m]) of shipped models below the bars, held to their own
 measured figures (first builds of the Panda pairs, which learned little more than their
 boundary: 0.56 / 3.3 mm Panda–Panda, 0.45 / 2.5 mm and 0.57 / 1.4 mm for the two sides of
-UR5–Panda; README Limitations) so they cannot regress."""
+UR5–Panda; 0.65 / 0.9 mm for the UR5 pair's far range, where V stays near l: the arms barely
+reach each other; README Limitations) so they cannot regress."""
 
 
 @pytest.mark.parametrize(

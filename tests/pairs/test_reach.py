@@ -66,10 +66,13 @@ def test_every_pair_that_can_touch_is_covered_by_a_model() -> None:
         for low, high in sorted(found):
             if low <= covered:
                 covered = max(covered, high)
-        expected = KNOWN_GAPS.get((a, b), reach)
-        assert covered == pytest.approx(expected) and covered <= reach, (
+        said = (
             f"{a}-{b}: models cover {MIN_BASE_DISTANCE}-{covered} m; the arms touch up to {reach}"
         )
+        if (a, b) in KNOWN_GAPS:
+            assert covered == pytest.approx(KNOWN_GAPS[a, b]) and covered < reach, said
+        else:
+            assert covered >= reach - 1e-9, said
 
 
 def _pair_at(gap: float, robot: str = "ur5", tilt: float = 0.0) -> Cell:
