@@ -494,7 +494,7 @@ def main() -> int:
         "--physics-rate", type=float, default=100.0, help="[Hz] the bridge's steps and joint states"
     )
     parser.add_argument(
-        "--executor", default="single", choices=("single", "events"), help="how the nodes spin"
+        "--executor", default="events", choices=("single", "events"), help="how the nodes spin"
     )
     parser.add_argument("--keep", help="directory for the log and the process outputs")
     parser.add_argument("--results", default=str(RESULTS), help="where the report goes")

@@ -236,13 +236,15 @@ def run_main(
 
 
 EXECUTOR_ENV = "NEHMO_EXECUTOR"
-"""``single`` (default: rclpy's SingleThreadedExecutor) or ``events`` (rclpy's C++
-EventsExecutor, ``rclpy.experimental``): how the nodes spin."""
+"""``events`` (default: rclpy's C++ EventsExecutor, ``rclpy.experimental``) or ``single``
+(rclpy's SingleThreadedExecutor): how the nodes spin. With five planners, the bridge and the
+recorder on two cores the events executor used 1.18 cores against 1.98 and kept the bridge at
+real time (``bench/results/ros_load_events.md`` against ``ros_load_after.md``)."""
 
 
 def make_executor() -> Any:
-    """The executor ``NEHMO_EXECUTOR`` names (``single`` when unset)."""
-    kind = os.environ.get(EXECUTOR_ENV, "single").strip() or "single"
+    """The executor ``NEHMO_EXECUTOR`` names (``events`` when unset)."""
+    kind = os.environ.get(EXECUTOR_ENV, "events").strip() or "events"
     if kind == "single":
         return SingleThreadedExecutor()
     if kind == "events":

@@ -142,6 +142,7 @@ def test_ros2_pkg_executables_lists_the_install_spaces_nodes(colcon_install: Pat
     assert proc.stdout.splitlines() == [
         "nehmo_ros arm_planner",
         "nehmo_ros command_watchdog",
+        "nehmo_ros lifecycle_manager",
         "nehmo_ros orchestrate",
         "nehmo_ros recorder",
     ]
