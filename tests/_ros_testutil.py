@@ -108,3 +108,77 @@ def in_process(executable: str, params: Sequence[str]) -> Iterator[Spinner]:
         spinner.close()
     finally:
         rclpy.try_shutdown()
+
+
+class CellProbe:
+    """A plain rclpy node in the test process standing in for a cell's drivers: it publishes
+    every arm's joint state every ``period`` s (positions from ``positions()``, called at each
+    publication), optionally a latched goal for one arm, and records what reaches
+    ``command_topic`` as ``(monotonic time, data)`` in :attr:`commands`."""
+
+    def __init__(
+        self,
+        name: str,
+        joint_names: dict[str, list[str]],
+        positions: Callable[[], dict[str, Sequence[float]]],
+        command_topic: str,
+        goal: tuple[str, Sequence[float]] | None = None,
+        period: float = 0.02,
+    ) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray
+
+        self.rclpy, self.JointState = rclpy, JointState
+        self.joint_names, self.positions = joint_names, positions
+        self.commands: list[tuple[float, list[float]]] = []
+        rclpy.init(args=[], domain_id=DOMAIN_ID)
+        self.node = Node(name)
+        self.states = {
+            a: self.node.create_publisher(JointState, f"/{a}/joint_states", qos_profile_sensor_data)
+            for a in joint_names
+        }
+        if goal is not None:
+            latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            arm_id, position = goal
+            pub = self.node.create_publisher(JointState, f"/{arm_id}/goal", latched)
+            pub.publish(JointState(name=joint_names[arm_id], position=list(position)))
+        self.node.create_subscription(Float64MultiArray, command_topic, self._on_command, 50)
+        self.node.create_timer(period, self._publish_states)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+
+    def _on_command(self, msg: Any) -> None:
+        self.commands.append((time.monotonic(), list(msg.data)))
+
+    def _publish_states(self) -> None:
+        stamp = self.node.get_clock().now().to_msg()
+        for arm_id, q in self.positions().items():
+            msg = self.JointState(name=self.joint_names[arm_id], position=[float(v) for v in q])
+            msg.header.stamp = stamp
+            self.states[arm_id].publish(msg)
+
+    def spin(self, seconds: float, until: Callable[[], bool] | None = None) -> bool:
+        """Spin until ``until()`` holds (True) or ``seconds`` pass."""
+        return spin_until(self.executor, seconds, until)
+
+    def call(self, srv_type: Any, name: str, request: Any, seconds: float = 60.0) -> Any:
+        """Call a service once it is offered; its response (an assertion error if it is not
+        offered or does not answer within ``seconds``)."""
+        client = self.node.create_client(srv_type, name)
+        try:
+            assert self.spin(seconds, client.service_is_ready), f"{name} not offered"
+            future = client.call_async(request)
+            assert self.spin(seconds, future.done), f"{name} did not answer"
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def close(self) -> None:
+        self.executor.remove_node(self.node)
+        self.node.destroy_node()
+        self.executor.shutdown(timeout_sec=1.0)
+        self.rclpy.try_shutdown()

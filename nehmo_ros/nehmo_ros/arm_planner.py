@@ -146,11 +146,6 @@ PARAMS: dict[str, Param] = {**NODE_PARAMS, **PLANNER_PARAMS}
 HISTORY = 50
 
 
-def _epsilon(planner: Any) -> float:
-    """The margin ε [m] the planner keeps (raised by certified margins)."""
-    return float(getattr(getattr(planner, "settings", None), "opt", PlannerSettings().opt).epsilon)
-
-
 def _typed(value: object) -> object:
     """A parameter's value as its setting takes it (arrays as tuples)."""
     if isinstance(value, str | bool | int | float):
@@ -323,7 +318,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
                 raw=True,
             )
         self.goals = GoalKeeper(self, self.controller, arm_id)  # the topic's and the action's
-        self.markers = MarkerPublisher(self, self.controller, arm_id, _epsilon(planner), rate)
+        self.markers = MarkerPublisher(self, self.controller, arm_id, settings.opt.epsilon, rate)
         self.create_subscription(JointState, goal_topic(arm_id), self.goals.on_topic, LATCHED)
         self.pause_services = PauseServices(self, self.controller, arm_id)
         self.period = control.period

@@ -6,7 +6,8 @@ peer) with it, to plot.
 Three markers per message (namespace ``nehmo/<id>``):
 
 - ``critical`` (id 0, LINE_LIST): the closest pair of link origins between the arm and its
-  critical peer (the peer of the smallest ``V``), coloured by ``V`` against the margin ``ε``:
+  critical peer (the peer of the smallest ``V``), coloured by ``V`` against the margin ``ε``
+  (the planner setting `opt.epsilon`, the floor of the certified margin):
   green ``V ≥ 2ε``, amber ``ε ≤ V < 2ε``, red ``V < ε``; deleted (action DELETE) while no peer is
   constrained. Link origins stand in for the closest points of the geometry, which the planner
   never computes (it plans on the learned ``V``).

@@ -183,6 +183,9 @@ def _evaluate_argv(out: Path, *extra: str) -> list[str]:
     return [
         sys.executable, "-m", "nehmo_core.cli", "evaluate", "--setup", SETUP, "--planners", ROW,
         "--episodes", str(EPISODES), "--seed", str(SEED), "--out", str(out), "--no-progress",
+        # no wall-clock solve deadline: a solve slowed by the loaded machine would turn into a
+        # fail-safe step in one run and not the other, and the runs must agree exactly
+        "--planner-setting", "opt.deadline=3600",
         *extra,
     ]  # fmt: skip
 

@@ -18,12 +18,12 @@ import math
 import re
 import signal
 import time
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from _ros_testutil import DOMAIN_ID, child_env, spin_until
+from _ros_testutil import CellProbe, child_env
 
 from nehmo_core.robots import load_cell
 from nehmo_ros.command_watchdog import planner_topic
@@ -38,77 +38,41 @@ WAIT_S = 60.0
 TRIP = re.compile(r"watchdog: no command for ur5_0 in ([0-9.]+) s")
 
 
-@dataclass
-class Probe:
+def _states() -> dict[str, list[float]]:
+    return {a: [0.0, -1.2, 1.0, 0.0, 0.0, 0.0] if a == "ur5_0" else [0.0] * 6 for a in CELL.arm_ids}
+
+
+class Probe(CellProbe):
     """States of both arms at 50 Hz, ur5_0's goal, and what reaches the controller's topic."""
 
-    received: list[tuple[float, list[float]]] = field(default_factory=list)  # (monotonic, data)
-
-    def __post_init__(self) -> None:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.node import Node
-        from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
-        from sensor_msgs.msg import JointState
+    def __init__(self) -> None:
         from std_msgs.msg import Float64MultiArray
 
-        self.rclpy, self.JointState, self.Float64MultiArray = rclpy, JointState, Float64MultiArray
-        rclpy.init(args=[], domain_id=DOMAIN_ID)
-        self.node = Node("watchdog_probe")
-        self.states = {
-            a: self.node.create_publisher(JointState, f"/{a}/joint_states", qos_profile_sensor_data)
-            for a in CELL.arm_ids
-        }
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        goal = self.node.create_publisher(JointState, "/ur5_0/goal", latched)
-        goal.publish(JointState(name=NAMES, position=[1.0, -1.0, 1.0, 0.5, 0.5, 0.5]))
+        super().__init__(
+            "watchdog_probe",
+            {a: NAMES for a in CELL.arm_ids},
+            _states,
+            "/ur5_0/velocity_controller/commands",
+            goal=("ur5_0", [1.0, -1.0, 1.0, 0.5, 0.5, 0.5]),
+        )
+        self.Float64MultiArray = Float64MultiArray
         self.planner_side = self.node.create_publisher(
             Float64MultiArray, planner_topic("ur5_0"), 10
         )
-        self.node.create_subscription(
-            Float64MultiArray,
-            "/ur5_0/velocity_controller/commands",
-            lambda m: self.received.append((time.monotonic(), list(m.data))),
-            50,
-        )
-        self.node.create_timer(0.02, self._publish_states)
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(self.node)
 
-    def _publish_states(self) -> None:
-        stamp = self.node.get_clock().now().to_msg()
-        for arm_id, pub in self.states.items():
-            q = [0.0, -1.2, 1.0, 0.0, 0.0, 0.0] if arm_id == "ur5_0" else [0.0] * 6
-            msg = self.JointState(name=NAMES, position=q, velocity=[0.0] * 6)
-            msg.header.stamp = stamp
-            pub.publish(msg)
+    @property
+    def received(self) -> list[tuple[float, list[float]]]:
+        return self.commands
 
-    def spin(self, seconds: float, until: Callable[[], bool]) -> bool:
-        """Spin until ``until()`` holds (True) or ``seconds`` pass (False)."""
-        return spin_until(self.executor, seconds, until)
-
-    def call(self, service: str) -> tuple[bool, str]:
+    def trigger(self, service: str) -> tuple[bool, str]:
         """Call a std_srvs/Trigger service; (success, message)."""
         from std_srvs.srv import Trigger
 
-        client = self.node.create_client(Trigger, service)
-        try:
-            assert self.spin(WAIT_S, client.service_is_ready), f"{service} not offered"
-            future = client.call_async(Trigger.Request())
-            assert self.spin(WAIT_S, future.done), f"{service} did not answer"
-            response = future.result()
-            return bool(response.success), str(response.message)
-        finally:
-            self.node.destroy_client(client)
+        response = self.call(Trigger, service, Trigger.Request(), WAIT_S)
+        return bool(response.success), str(response.message)
 
     def command(self, data: list[float]) -> None:
         self.planner_side.publish(self.Float64MultiArray(data=data))
-
-    def close(self) -> None:
-        self.executor.remove_node(self.node)
-        self.node.destroy_node()
-        self.executor.shutdown(timeout_sec=1.0)
-        self.rclpy.try_shutdown()
 
 
 def _moving(data: list[float]) -> bool:
@@ -159,12 +123,12 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
     try:
         moving = lambda: sum(_moving(d) for _, d in probe.received) >= 10  # noqa: E731
         assert probe.spin(STARTUP_S, moving), planner.output()[-2000:] + watchdog.output()[-2000:]
-        answers = [probe.call("/ur5_0/planner/pause")]
+        answers = [probe.trigger("/ur5_0/planner/pause")]
         mark = len(probe.received)
         held = lambda: sum(not _moving(d) for _, d in probe.received[mark:]) >= 10  # noqa: E731
         assert probe.spin(WAIT_S, held)
         paused = [d for _, d in probe.received[mark:]]
-        answers += [probe.call("/ur5_0/planner/resume"), probe.call("/ur5_0/planner/resume")]
+        answers += [probe.trigger("/ur5_0/planner/resume"), probe.trigger("/ur5_0/planner/resume")]
         mark = len(probe.received)
         assert probe.spin(WAIT_S, lambda: any(_moving(d) for _, d in probe.received[mark:]))
         planner.proc.send_signal(signal.SIGKILL)

@@ -18,13 +18,13 @@ import subprocess
 import textwrap
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from _ros_testutil import DOMAIN_ID, child_env, spin_until
+from _ros_testutil import CellProbe, child_env, spin_until
 
 from nehmo_core.robots import load_cell
 from nehmo_ros.processes import Process, node_command
@@ -102,58 +102,30 @@ CLIENT = textwrap.dedent(
 )
 
 
-@dataclass
-class Sim:
+class Sim(CellProbe):
     """Both arms kinematically at 100 Hz; ur5_0 follows its latest command (held 0.2 s)."""
 
-    q: dict[str, np.ndarray]
-    commands: list[tuple[float, list[float]]] = field(default_factory=list)
-    _last: tuple[float, np.ndarray] | None = None
-
-    def __post_init__(self) -> None:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.node import Node
-        from rclpy.qos import qos_profile_sensor_data
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import Float64MultiArray
-
-        self.rclpy, self.JointState = rclpy, JointState
-        rclpy.init(args=[], domain_id=DOMAIN_ID)
-        self.node = Node("move_arm_sim")
-        self.pubs = {
-            a: self.node.create_publisher(JointState, f"/{a}/joint_states", qos_profile_sensor_data)
-            for a in CELL.arm_ids
-        }
-        self.node.create_subscription(
-            Float64MultiArray, "/ur5_0/velocity_controller/commands", self._on_command, 50
+    def __init__(self, q: dict[str, np.ndarray]) -> None:
+        self.q = q
+        self._last: tuple[float, np.ndarray] | None = None
+        super().__init__(
+            "move_arm_sim",
+            {a: NAMES for a in CELL.arm_ids},
+            self._step,
+            "/ur5_0/velocity_controller/commands",
+            period=0.01,
         )
-        self.node.create_timer(0.01, self._step)
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(self.node)
 
     def _on_command(self, msg: Any) -> None:
-        now = time.monotonic()
-        self.commands.append((now, list(msg.data)))
+        super()._on_command(msg)
         u = np.asarray(msg.data, dtype=float)
         if len(u) == 6 and np.all(np.isfinite(u)):
-            self._last = (now, u)
+            self._last = (time.monotonic(), u)
 
-    def _step(self) -> None:
-        now = time.monotonic()
-        if self._last is not None and now - self._last[0] < 0.2:
+    def _step(self) -> dict[str, np.ndarray]:
+        if self._last is not None and time.monotonic() - self._last[0] < 0.2:
             self.q["ur5_0"] = self.q["ur5_0"] + 0.01 * self._last[1]
-        stamp = self.node.get_clock().now().to_msg()
-        for arm_id, pub in self.pubs.items():
-            msg = self.JointState(name=NAMES, position=[float(v) for v in self.q[arm_id]])
-            msg.header.stamp = stamp
-            pub.publish(msg)
-
-    def close(self) -> None:
-        self.executor.remove_node(self.node)
-        self.node.destroy_node()
-        self.executor.shutdown(timeout_sec=1.0)
-        self.rclpy.try_shutdown()
+        return self.q
 
 
 @dataclass(frozen=True)

@@ -6,13 +6,11 @@ not exist fails the configure transition and leaves the node unconfigured."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
-from _ros_testutil import DOMAIN_ID, child_env, spin_until
+from _ros_testutil import CellProbe, child_env
 
 from nehmo_core.robots import load_cell
 from nehmo_ros.processes import Process, node_command
@@ -23,83 +21,37 @@ STARTUP_S = 240.0
 WAIT_S = 60.0
 
 
-@dataclass
-class Probe:
-    """Joint states of both arms at 50 Hz, ur5_0's goal; records ur5_0's commands."""
+STATES = {"ur5_0": [0.0, -1.2, 1.0, 0.0, 0.0, 0.0], "ur5_1": [2.0, -1.2, 1.0, 0.0, 0.0, 0.0]}
 
-    commands: list[tuple[float, list[float]]] = field(default_factory=list)
 
-    def __post_init__(self) -> None:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.node import Node
-        from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import Float64MultiArray
+class Probe(CellProbe):
+    """Joint states of both arms at 50 Hz, ur5_0's goal; records ur5_0's commands; calls the
+    lifecycle services."""
 
-        self.rclpy, self.JointState = rclpy, JointState
-        rclpy.init(args=[], domain_id=DOMAIN_ID)
-        self.node = Node("lifecycle_probe")
-        self.states = {
-            a: self.node.create_publisher(JointState, f"/{a}/joint_states", qos_profile_sensor_data)
-            for a in CELL.arm_ids
-        }
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        goal = self.node.create_publisher(JointState, "/ur5_0/goal", latched)
-        goal.publish(JointState(name=NAMES, position=[1.0, -1.0, 1.0, 0.5, 0.5, 0.5]))
-        self.node.create_subscription(
-            Float64MultiArray,
+    def __init__(self) -> None:
+        super().__init__(
+            "lifecycle_probe",
+            {a: NAMES for a in CELL.arm_ids},
+            lambda: STATES,
             "/ur5_0/velocity_controller/commands",
-            lambda m: self.commands.append((time.monotonic(), list(m.data))),
-            50,
+            goal=("ur5_0", [1.0, -1.0, 1.0, 0.5, 0.5, 0.5]),
         )
-        self.node.create_timer(0.02, self._publish_states)
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(self.node)
-
-    def _publish_states(self) -> None:
-        stamp = self.node.get_clock().now().to_msg()
-        for arm_id, pub in self.states.items():
-            q = [0.0, -1.2, 1.0, 0.0, 0.0, 0.0] if arm_id == "ur5_0" else [2.0, -1.2, 1, 0, 0, 0]
-            msg = self.JointState(name=NAMES, position=[float(v) for v in q])
-            msg.header.stamp = stamp
-            pub.publish(msg)
-
-    def spin(self, seconds: float, until: Callable[[], bool] | None = None) -> bool:
-        return spin_until(self.executor, seconds, until)
-
-    def _call(self, srv_type: Any, name: str, request: Any) -> Any:
-        client = self.node.create_client(srv_type, name)
-        try:
-            assert self.spin(STARTUP_S, client.service_is_ready), f"{name} not offered"
-            future = client.call_async(request)
-            assert self.spin(WAIT_S, future.done), f"{name} did not answer"
-            return future.result()
-        finally:
-            self.node.destroy_client(client)
 
     def state(self, node: str) -> str:
         from lifecycle_msgs.srv import GetState
 
-        return str(
-            self._call(GetState, f"/{node}/get_state", GetState.Request()).current_state.label
-        )
+        answer = self.call(GetState, f"/{node}/get_state", GetState.Request(), STARTUP_S)
+        return str(answer.current_state.label)
 
     def transition(self, node: str, transition: int) -> bool:
         from lifecycle_msgs.msg import Transition
         from lifecycle_msgs.srv import ChangeState
 
         request = ChangeState.Request(transition=Transition(id=transition))
-        return bool(self._call(ChangeState, f"/{node}/change_state", request).success)
+        return bool(self.call(ChangeState, f"/{node}/change_state", request, STARTUP_S).success)
 
     def commands_since(self, t: float) -> list[list[float]]:
         return [u for s, u in self.commands if s > t]
-
-    def close(self) -> None:
-        self.executor.remove_node(self.node)
-        self.node.destroy_node()
-        self.executor.shutdown(timeout_sec=1.0)
-        self.rclpy.try_shutdown()
 
 
 @pytest.fixture(scope="module")

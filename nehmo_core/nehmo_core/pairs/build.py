@@ -46,7 +46,7 @@ from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.pairs.budgets import BUDGETS
 from nehmo_core.pairs.check import judge_mirror, pair_names, robot_figures, write_manifest
 from nehmo_core.pairs.probes import RESULT
-from nehmo_core.pairs.reach import MIN_BASE_DISTANCE
+from nehmo_core.pairs.reach import checked_range
 from nehmo_core.robots import registry
 from nehmo_core.robots.descriptions import robot_names
 
@@ -96,18 +96,7 @@ class PairBuild:
             raise InvalidValueError("--budget", f"must be one of {sorted(BUDGETS)}", budget)
         if threads < 1:
             raise InvalidValueError("--threads", "must be >= 1", threads)
-        if not (tag.isidentifier() and tag.islower()):
-            raise InvalidValueError("--tag", "must be a lower-case word (letters, digits, _)", tag)
-        if base_range is not None:
-            low, high = base_range
-            if not MIN_BASE_DISTANCE <= low < high:
-                rule = f"must be LOW HIGH [m] with {MIN_BASE_DISTANCE} <= LOW < HIGH"
-                raise InvalidValueError("--base-range", rule, list(base_range))
-            if tag == "any":
-                rule = "covers a part of the base distances, so it needs a --tag (e.g. far)"
-                raise InvalidValueError("--base-range", rule, list(base_range))
-        self.base_range = None if base_range is None else (float(low), float(high))
-        self.tag = tag
+        self.base_range, self.tag = checked_range(base_range, tag), tag
         self.robots = (robot_1, robot_2)
         self.names = pair_names(robot_1, robot_2, tag)
         self.pair = self.names[0]
@@ -139,8 +128,7 @@ class PairBuild:
         }
         if not self.state_path.exists():
             return fresh
-        state = json.loads(self.state_path.read_text())
-        state.setdefault("base_range", None)  # builds before --base-range covered the reach
+        state = {"base_range": None, **json.loads(self.state_path.read_text())}  # older: None
         for key in ("pair", "budget", "seed", "models", "base_range"):
             if state.get(key) != fresh[key]:
                 raise InvalidValueError(
@@ -199,8 +187,7 @@ class PairBuild:
         return self.models / f"{self.pair}.card.json"
 
     def _restore_manifest(self) -> None:
-        """Write the pair manifest again from the check stage's figures if it has gone missing
-        (a new model folder of the same path, a clean checkout): the later stages need it."""
+        """Rewrite a missing pair manifest from the check stage's figures (later stages need it)."""
         if not self.done("check") or (self.models / f"{self.pair}.pairs.yaml").exists():
             return
         figures = self.state["stages"]["check"]["figures"]

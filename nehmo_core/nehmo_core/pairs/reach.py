@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from nehmo_core.errors import InvalidValueError
 from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel
 
 __all__ = [
@@ -32,6 +33,7 @@ __all__ = [
     "base_gap",
     "base_range",
     "can_touch",
+    "checked_range",
     "horizontal_reach",
 ]
 
@@ -103,6 +105,23 @@ def horizontal_reach(
         return best
     finally:
         world.close()
+
+
+def checked_range(base_range: tuple[float, float] | None, tag: str) -> tuple[float, float] | None:
+    """A pair build's ``--base-range`` and ``--tag``, checked: a part of the distances needs a
+    tag of its own (the pair is then ``A_B_<tag>``)."""
+    if not (tag.isidentifier() and tag.islower()):
+        raise InvalidValueError("--tag", "must be a lower-case word (letters, digits, _)", tag)
+    if base_range is None:
+        return None
+    low, high = float(base_range[0]), float(base_range[1])
+    if not MIN_BASE_DISTANCE <= low < high:
+        rule = f"must be LOW HIGH [m] with {MIN_BASE_DISTANCE} <= LOW < HIGH"
+        raise InvalidValueError("--base-range", rule, list(base_range))
+    if tag == "any":
+        rule = "covers a part of the base distances, so it needs a --tag (e.g. far)"
+        raise InvalidValueError("--base-range", rule, list(base_range))
+    return low, high
 
 
 def base_range(reach_1: float, reach_2: float) -> tuple[float, float]:
