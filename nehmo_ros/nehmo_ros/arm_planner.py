@@ -72,7 +72,7 @@ from nehmo_core.planning.settings import REMOVED, RENAMED, PlannerSettings
 from nehmo_ros.control import ArmController, ControlSettings
 from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
 from nehmo_ros.markers import MarkerPublisher
-from nehmo_ros.move_action import GoalKeeper, decision_mode
+from nehmo_ros.move_action import GoalKeeper
 from nehmo_ros.node_support import (
     NODE_ERRORS,
     Param,
@@ -359,7 +359,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
         self._read_states()
         decision = self.controller.tick(now, stamp_ns)
         self.goals.on_tick(decision)
-        self.markers.on_tick(decision, decision_mode(decision, self.controller.paused))
+        self.markers.on_tick(decision)
         if not self._ready:
             if not decision.ready:  # nothing to command yet: the bridge's watchdog holds the arm
                 self.get_logger().info(f"waiting ({decision.status})", throttle_duration_sec=2.0)

@@ -32,6 +32,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.logs.topics import markers_topic, min_value_topic
 from nehmo_core.robots.model import Cell
+from nehmo_ros.move_action import decision_mode
 
 __all__ = ["FRAME", "MARKER_RATE", "PlannerMarkers", "markers_topic", "value_colour"]
 
@@ -133,11 +134,12 @@ class MarkerPublisher:
         self.pub = node.create_publisher(MarkerArray, markers_topic(arm_id), 5)
         self.value_pub = node.create_publisher(Float64, min_value_topic(arm_id), 5)
 
-    def on_tick(self, decision: Any, mode: str) -> None:
+    def on_tick(self, decision: Any) -> None:
         self.due -= 1
         if self.due > 0:
             return
         self.due = self.every
+        mode = decision_mode(decision, self.controller.paused)
         states = {}
         for arm_id in self.controller.cell.arm_ids:
             got = self.controller.states.get(arm_id)

@@ -37,14 +37,11 @@ class StateIntake:
         driver may publish at 500 Hz; the planner needs one state per arm and tick)."""
         latest, self._latest = self._latest, {}
         for arm_id, (data, received) in latest.items():
-            try:
-                msg = deserialize_message(data, JointState)
-            except Exception as err:  # not a JointState: rejected like a malformed one
-                msg = err
-            self._on_state(arm_id, msg, received)
+            self._on_state(arm_id, data, received)
 
-    def _on_state(self, arm_id: str, msg: Any, now: float) -> None:
+    def _on_state(self, arm_id: str, data: bytes, now: float) -> None:
         try:
+            msg = deserialize_message(data, JointState)
             stamp = msg.header.stamp
             stamp_ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
             note = self.controller.update_state(arm_id, msg.name, msg.position, now, stamp_ns)
