@@ -22,6 +22,7 @@ from nehmo_core.planning.settings.groups import (
 )
 from nehmo_core.planning.settings.spec import Rule
 from nehmo_core.planning.settings.stage_groups import (
+    ContactSettings,
     EscapeSettings,
     ExactGuardSettings,
     HoldSettings,
@@ -36,6 +37,7 @@ PAPER_OPT: Mapping[str, Any] = types.MappingProxyType(
         "margins.certified": False,
         "hold.bound": 1.0,
         "exact_guard.gap": 0.0,
+        "contact.clearance": 0.0,
         "silent_watch.lookahead": 0.0,
         "self_clearance.enabled": False,
         "escape.enabled": False,
@@ -110,6 +112,7 @@ class PlannerSettings:
     fail_safe: FailSafeSettings = field(default_factory=FailSafeSettings)
     hold: HoldSettings = field(default_factory=HoldSettings)
     exact_guard: ExactGuardSettings = field(default_factory=ExactGuardSettings)
+    contact: ContactSettings = field(default_factory=ContactSettings)
     silent_watch: SilentWatchSettings = field(default_factory=SilentWatchSettings)
     self_clearance: SelfClearanceSettings = field(default_factory=SelfClearanceSettings)
     escape: EscapeSettings = field(default_factory=EscapeSettings)

@@ -11,6 +11,7 @@ from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.settings.spec import check_group, setting
 
 __all__ = [
+    "ContactSettings",
     "EscapeSettings",
     "ExactGuardSettings",
     "HoldSettings",
@@ -83,6 +84,33 @@ class ExactGuardSettings:
 
     def __post_init__(self) -> None:
         check_group(self, "exact_guard")
+
+
+@dataclass(frozen=True)
+class ContactSettings:
+    """The contact guard (``planning/stages/contact_guard.py``).
+
+    With the real geometry, a step may not bring the arm closer to a peer already within
+    ``clearance``; a step that would is shortened or replaced by one up the real distance.
+    """
+
+    clearance: float = setting(
+        0.02,
+        "real distance to a peer below which no step may close it (0: off)",
+        "m",
+        ge=0,
+        le=1,
+    )
+    # the learned V reads within a few centimetres of the real distance near contact
+    value: float = setting(
+        0.05, "only peers whose V now reads below this are checked", "m", gt=-1, le=1
+    )
+    probe: float = setting(
+        0.01, "joint offset of the real distance's central differences", "rad", gt=0, le=0.2
+    )
+
+    def __post_init__(self) -> None:
+        check_group(self, "contact")
 
 
 @dataclass(frozen=True)

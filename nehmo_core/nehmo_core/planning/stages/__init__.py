@@ -14,6 +14,9 @@ stage (settings group)   kind                what it changes; what it keeps
 (:mod:`.stall_escape`)
 ``exact_guard``          command filter      shortens a step toward a holding peer's real
                                              geometry; never lengthens one
+``contact``              command filter      within a few cm of a peer's real geometry: no step
+(:mod:`.contact_guard`)                      closes the gap; a blocked one turns up the real
+                                             distance (only where the V rows are broken)
 =======================  ==================  ===================================================
 
 :func:`build_stages` makes the stages a planner's settings switch on.
@@ -32,6 +35,7 @@ from nehmo_core.planning.opt.pipeline import (
     RowProvider,
     Stage,
 )
+from nehmo_core.planning.stages.contact_guard import ContactGuard
 from nehmo_core.planning.stages.exact_guard import ExactGuard
 from nehmo_core.planning.stages.self_clearance import SelfClearance
 from nehmo_core.planning.stages.silent_peers import SilentPeers
@@ -68,9 +72,14 @@ def build_stages(host: Host) -> Staged:
     rows: tuple[RowProvider, ...] = ()
     if s.self_clearance.enabled:
         rows = (SelfClearance(host.robot, s.self_clearance),)
+    filters: list[CommandFilter] = []
+    if s.exact_guard.gap > 0.0:
+        filters.append(ExactGuard(host))
+    if s.contact.clearance > 0.0:  # last: it sees the command every other stage shaped
+        filters.append(ContactGuard(host))
     return Staged(
         announcer=HoldAnnouncer(host) if s.hold.bound < FULL_SPEED else None,
         rows=rows,
         objectives=tuple(objectives),
-        filters=(ExactGuard(host),) if s.exact_guard.gap > 0.0 else (),
+        filters=tuple(filters),
     )
