@@ -108,6 +108,12 @@ class ContactSettings:
     probe: float = setting(
         0.01, "joint offset of the real distance's central differences", "rad", gt=0, le=0.2
     )
+    scales: tuple[float, ...] = setting(
+        (1.0, 0.5, 0.25),
+        "shares of a step tried in turn (none fits: the step up the real distance, else stay)",
+        gt=0,
+        le=1,
+    )
 
     def __post_init__(self) -> None:
         check_group(self, "contact")

@@ -13,11 +13,11 @@ occur), and there the learned V, which errs by centimetres near contact, can poi
 fail-safe's full-speed step ``ū·sign(∂V/∂q)`` into the peer. The guard checks, with PyBullet,
 every peer whose V reads below ``contact.value``: when the arms are closer than
 ``contact.clearance`` the step (end and midpoint, the peers posed where they are now) may not
-bring them closer; a step that would is shortened (½, ¼), and if none fits it is replaced by
-``cap·ū·g/max|g|`` along the gradient ``g`` of the real distance over this arm's joints (central
-differences of ``contact.probe`` rad), kept within the row providers' rows and checked the same
-way (otherwise the arm stays still). Two arms that each do this do not close their gap to first
-order.
+bring them closer; a step that would is shortened (``contact.scales``: ½, ¼), and if none
+fits it is replaced by ``cap·ū·g/max|g|`` along the gradient ``g`` of the real distance over
+this arm's joints (central differences of ``contact.probe`` rad), kept within the row
+providers' rows and checked the same way (otherwise the arm stays still). Two arms that each
+do this do not close their gap to first order.
 """
 
 from __future__ import annotations
@@ -34,8 +34,6 @@ from nehmo_core.planning.stages.exact_guard import cell_world
 
 __all__ = ["ContactGuard", "contact_step"]
 
-_SCALES = (1.0, 0.5, 0.25)
-
 
 def _closest(
     world: CellWorld, arm_id: str, x: np.ndarray, peers: list[str], cutoff: float
@@ -45,11 +43,18 @@ def _closest(
 
 
 def _fits(
-    world: CellWorld, arm_id: str, q: np.ndarray, step: np.ndarray, peers: list[str], now: float
+    world: CellWorld,
+    arm_id: str,
+    q: np.ndarray,
+    step: np.ndarray,
+    peers: list[str],
+    now: float,
+    scales: tuple[float, ...],
 ) -> float:
-    """The largest share of ``step`` [rad] whose end and midpoint are no closer than ``now``."""
+    """The first share of ``step`` [rad] in ``scales`` whose end and midpoint are no closer
+    than ``now`` (0 if none)."""
     cutoff = now + 0.05
-    for scale in _SCALES:
+    for scale in scales:
         ends = [_closest(world, arm_id, q + f * scale * step, peers, cutoff) for f in (1.0, 0.5)]
         if min(ends) >= now:
             return scale
@@ -75,7 +80,7 @@ def contact_step(
     if now >= clearance:
         return u, False
     t = s.opt.t_plan
-    share = _fits(world, arm_id, q, u * t, peers, now)
+    share = _fits(world, arm_id, q, u * t, peers, now, s.contact.scales)
     if share >= 1.0:
         return u, False
     if share > 0.0:
@@ -96,7 +101,7 @@ def contact_step(
     step = y_max * grad / peak
     if tick.rows is not None and tick.rows.count:
         step = project_step(step, tick.rows, y_max)
-    share = _fits(world, arm_id, q, step, peers, now)
+    share = _fits(world, arm_id, q, step, peers, now, s.contact.scales)
     return step * share / t, True
 
 
