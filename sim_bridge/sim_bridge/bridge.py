@@ -109,10 +109,13 @@ class SimBridgeNode(Node):
             start_delay=float(p["start_delay"]),
             min_subscribers=int(p["min_subscribers"]),
             exit_when_done=bool(p["exit_when_done"]),
+            actuators=str(p["actuators"]),
         )
         kinds = parse_row(p["planners"], self.cell) if p["planners"] else {}
         self.scenario, source = load_episode(self.cell, p)
-        self.sim = BroadPhaseSimulator(self.cell, substeps=1, self_collision=self.s.self_collision)
+        self.sim = BroadPhaseSimulator(
+            self.cell, substeps=1, self_collision=self.s.self_collision, actuators=self.s.actuators
+        )
         self.sim.reset(self.scenario.start)
         self.metadata = self._metadata(kinds, source)
 
@@ -181,6 +184,7 @@ class SimBridgeNode(Node):
                 "latency_ticks": 1,
                 "substeps": s.substeps_per_tick,
                 "self_collision": s.self_collision,
+                "actuators": s.actuators,
                 "time_limit": s.time_limit,
                 "max_ticks": round(s.time_limit * s.control_rate),
                 "physics_rate_hz": s.physics_rate,
@@ -222,8 +226,15 @@ class SimBridgeNode(Node):
             clock.clock.sec, clock.clock.nanosec = divmod(int(t_ns), 1_000_000_000)
             self.clock_pub.publish(clock)
             self.published["clock"] += 1
+        # what sensors read (noisy with a realistic actuator model) and how fast each arm moves
+        observed = self.sim.observed() if not self.sim.ideal else self.sim.q
+        moving = (
+            {a: self.sim.trackers[a].velocity for a in velocities}
+            if not self.sim.ideal
+            else velocities
+        )
         for a, pub in self.state_pubs.items():
-            pub.publish(self._joint_state(a, self.sim.q[a], velocities[a], t_ns))
+            pub.publish(self._joint_state(a, observed[a], moving[a], t_ns))
         self.published["joint_states_per_arm"] += 1
 
     def _now(self) -> float:

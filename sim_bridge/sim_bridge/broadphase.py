@@ -296,8 +296,12 @@ class BroadPhaseSimulator(CellSimulator):
     only pairs that provably do not touch skip their exact query.
     """
 
-    def __init__(self, cell: Cell, substeps: int = 10, self_collision: bool = True) -> None:
-        super().__init__(cell, substeps=substeps, self_collision=self_collision)
+    def __init__(
+        self, cell: Cell, substeps: int = 10, self_collision: bool = True, actuators: str = "ideal"
+    ) -> None:
+        super().__init__(
+            cell, substeps=substeps, self_collision=self_collision, actuators=actuators
+        )
         by_robot: dict[str, list[LinkSpheres]] = {}
         for arm in cell.arms:
             key = str(arm.robot.urdf_path)

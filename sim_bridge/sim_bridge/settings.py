@@ -10,6 +10,7 @@ from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.eval.setups import SUCCESS_NORMS
 from nehmo_core.robots.loader import load_cell
 from nehmo_core.robots.model import Cell
+from nehmo_core.sim.actuators import ACTUATOR_MODELS
 from nehmo_core.sim.scenario_files import load_scenario_set
 from nehmo_core.sim.scenarios import Scenario, sample_scenario, scenario_rng
 from nehmo_ros.node_support import Param
@@ -33,6 +34,10 @@ PARAMS: dict[str, Param] = {
     "stop_on_collision": Param(True, "end the episode at the first collision"),
     "stop_on_success": Param(True, "end the episode when every arm is at its goal"),
     "self_collision": Param(True, "check each arm's self-collision too"),
+    "actuators": Param(
+        "ideal",
+        "ideal (q' = u) | realistic (acceleration limits, command latency, joint-state noise)",
+    ),
     "wait_for_planners": Param(True, "start when every arm's command topic has a publisher"),
     "start_timeout": Param(60.0, "[s] longest wait for the planners"),
     "start_delay": Param(0.5, "[s] extra wait after the planners appear (discovery settles)"),
@@ -68,6 +73,7 @@ class BridgeSettings:
     start_delay: float
     min_subscribers: int
     exit_when_done: bool
+    actuators: str = "ideal"
 
     def __post_init__(self) -> None:
         for name in ("physics_rate", "control_rate", "real_time_factor", "command_timeout"):
@@ -92,6 +98,8 @@ class BridgeSettings:
             raise InvalidValueError("min_subscribers", "must be >= 0", self.min_subscribers)
         if self.success_norm not in SUCCESS_NORMS:
             raise UnknownNameError("success_norm", self.success_norm, SUCCESS_NORMS)
+        if self.actuators not in ACTUATOR_MODELS:
+            raise UnknownNameError("actuators", self.actuators, ACTUATOR_MODELS)
 
     @property
     def dt_ns(self) -> int:

@@ -114,10 +114,12 @@ def _registry(config: BatchConfig) -> ModelRegistry:
 
 
 def _simulator(cell_name: str, settings: EpisodeSettings) -> CellSimulator:
-    sims: dict[tuple[str, int, bool], CellSimulator] = _STATE.setdefault("sims", {})
-    key = (cell_name, settings.substeps, settings.self_collision)
+    sims: dict[tuple[str, int, bool, str], CellSimulator] = _STATE.setdefault("sims", {})
+    key = (cell_name, settings.substeps, settings.self_collision, settings.actuators)
     if key not in sims:
-        sims[key] = CellSimulator(load_cell(cell_name), settings.substeps, settings.self_collision)
+        sims[key] = CellSimulator(
+            load_cell(cell_name), settings.substeps, settings.self_collision, settings.actuators
+        )
     return sims[key]
 
 

@@ -25,12 +25,14 @@ from pathlib import Path
 from nehmo_core.cluster import CLUSTER_HELP, parse_cluster
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.eval.batch import BatchConfig, RowRun, run_rows
+from nehmo_core.eval.episode import EpisodeSettings
 from nehmo_core.eval.metrics import format_metrics
 from nehmo_core.eval.report import markdown_table, setup_summary, write_summary
 from nehmo_core.eval.scenario_sets import scenario_set_for
 from nehmo_core.eval.setups import SETUPS, get_setup, parse_row, row_slug
 from nehmo_core.planning.models.registry import parse_value_models, snapshot_value_models
 from nehmo_core.planning.settings import PlannerSettings, parse_assignments
+from nehmo_core.sim.actuators import ACTUATOR_MODELS
 from nehmo_core.sim.scenario_files import load_scenario_set
 from nehmo_core.sim.scenarios import ScenarioSet
 
@@ -105,6 +107,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="set a planner setting for every Opt row, e.g. opt.t_plan=0.08 or hold.bound=1 "
         "(names: docs/settings.md); repeatable",
     )
+    parser.add_argument(
+        "--actuators",
+        choices=ACTUATOR_MODELS,
+        default="ideal",
+        help="how simulated arms carry commands out: ideal (q' = u, the paper's) or realistic "
+        "(acceleration limits from the robot descriptions, command latency, joint-state noise)",
+    )
     parser.add_argument("--render", action="store_true", help="render each row's first episode")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -131,7 +140,7 @@ def _scenarios(args: argparse.Namespace) -> ScenarioSet:
 
 def _run_tasks(args: argparse.Namespace, rows: list[str], settings: PlannerSettings) -> int:
     from nehmo_core.eval.ha_tasks import load_tasks
-    from nehmo_core.eval.task_runner import TaskConfig, markdown, run_tasks
+    from nehmo_core.eval.task_runner import TIME_LIMIT, TaskConfig, markdown, run_tasks
 
     tasks = load_tasks(args.tasks)
     config = TaskConfig(
@@ -141,6 +150,7 @@ def _run_tasks(args: argparse.Namespace, rows: list[str], settings: PlannerSetti
         ),
         backend=args.backend,
         planner_settings=settings,
+        episode=EpisodeSettings(time_limit=TIME_LIMIT, actuators=args.actuators),
     )
 
     def report(row: dict[str, object]) -> None:
@@ -218,6 +228,8 @@ def run(args: argparse.Namespace) -> int:
         ),
         backend=args.backend,
         planner_settings=planner_settings,
+        # ideal: no override, so runs before this option resume as they were
+        episode_overrides=() if args.actuators == "ideal" else (("actuators", args.actuators),),
     )
     scenarios = _scenarios(args)
 

@@ -14,6 +14,7 @@ within the tolerance of its goal (checked at tick boundaries), or at the time li
 
 from __future__ import annotations
 
+import zlib
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
@@ -32,6 +33,7 @@ from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.interface import Planner
 from nehmo_core.planning.opt.peer_bounds import PeerBounds
 from nehmo_core.robots.model import Cell
+from nehmo_core.sim.actuators import ACTUATOR_MODELS
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenarios import Scenario
 
@@ -48,6 +50,7 @@ class EpisodeSettings:
     success_norm: str = "l2"
     success_tolerance: float = 0.1  # [rad]
     self_collision: bool = True
+    actuators: str = "ideal"  # how arms carry commands out (nehmo_core.sim.actuators)
 
     def __post_init__(self) -> None:
         if not self.rate > 0:
@@ -60,6 +63,8 @@ class EpisodeSettings:
             raise UnknownNameError("success norm", self.success_norm, SUCCESS_NORMS)
         if not self.success_tolerance > 0:
             raise InvalidValueError("success_tolerance", "must be > 0", self.success_tolerance)
+        if self.actuators not in ACTUATOR_MODELS:
+            raise UnknownNameError("actuator model", self.actuators, ACTUATOR_MODELS)
 
     @classmethod
     def for_setup(cls, setup: Setup, **overrides: Any) -> EpisodeSettings:
@@ -155,12 +160,18 @@ def run_episode(
     kinds = dict(kinds) if kinds is not None else {a: type(p).__name__ for a, p in planners.items()}
     timed = tuple(timed_arms) if timed_arms is not None else cell.arm_ids
     if simulator is not None and (
-        simulator.substeps != s.substeps or simulator.self_collision != s.self_collision
+        simulator.substeps != s.substeps
+        or simulator.self_collision != s.self_collision
+        or {m.name for m in simulator.actuators.values()} != {s.actuators}
     ):
         raise InvalidValueError(
-            "simulator", f"must use substeps={s.substeps} as the settings", simulator.substeps
+            "simulator",
+            f"must use substeps={s.substeps} and actuators={s.actuators!r} as the settings",
+            simulator.substeps,
         )
-    sim = simulator or CellSimulator(cell, substeps=s.substeps, self_collision=s.self_collision)
+    sim = simulator or CellSimulator(
+        cell, substeps=s.substeps, self_collision=s.self_collision, actuators=s.actuators
+    )
     log = EpisodeLogWriter(log_path, cell) if log_path is not None else None
     try:
         if log is not None:
@@ -194,7 +205,9 @@ def _loop(
     kinds: dict[str, str],
     timed: tuple[str, ...],
 ) -> EpisodeResult:
-    sim.reset(scenario.start)
+    # the sensor noise of a non-ideal actuator model: a stream per scenario
+    start = np.concatenate([scenario.start[a] for a in cell.arm_ids])
+    sim.reset(scenario.start, seed=zlib.crc32(start.tobytes()))
     for planner in planners.values():
         planner.reset()
     period_ns, dt = s.period_ns, s.period_ns / 1e9
@@ -209,7 +222,7 @@ def _loop(
         outcome = "success"
     else:
         for k in range(s.max_ticks):
-            observed = sim.positions()
+            observed = sim.observed()
             applied = {a: pending.get(a, hold[a]) for a in cell.arm_ids}
             planned = {}
             for a in cell.arm_ids:

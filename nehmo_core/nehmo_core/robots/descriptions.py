@@ -13,6 +13,8 @@ A robot ``NAME`` is a folder ``NAME/`` holding ``robot.yaml``::
       sphere_radius: 0.08
       sampling_ranges: [[low, high], ...]
       reach_m: 0.99                 # horizontal reach of the collision geometry [m]
+      accel_limits: [...]           # per joint [rad/s²] (the realistic actuator model)
+      accel_source: "..."           # where those limits come from
 
 The shipped robots live in ``nehmo_core/robots/data/``; more folders of robots can be named in
 the environment variable ``NEHMO_ROBOTS`` (separated like ``PATH``), e.g. where
@@ -55,6 +57,8 @@ _FACT_KEYS = {
     "sphere_radius",
     "sampling_ranges",
     "reach_m",
+    "accel_limits",
+    "accel_source",
 }
 
 
@@ -119,6 +123,10 @@ def _facts(raw: Any, where: str) -> RobotFacts:
             if ranges is None
             else tuple((float(lo), float(hi)) for lo, hi in ranges),
             reach_m=None if raw.get("reach_m") is None else float(raw["reach_m"]),
+            accel_limits=None
+            if raw.get("accel_limits") is None
+            else tuple(float(a) for a in raw["accel_limits"]),
+            accel_source=str(raw.get("accel_source", "")),
         )
     except (TypeError, ValueError) as exc:
         raise InvalidValueError(where, f"has a malformed entry ({exc})", raw) from None

@@ -55,6 +55,11 @@ class RobotFacts:
     reach_m: float | None = None
     """[m] Horizontal reach of the collision geometry from the base axis
     (:func:`~nehmo_core.pairs.reach.horizontal_reach`; None: measured when needed)."""
+    accel_limits: tuple[float, ...] | None = None
+    """[rad/s²] Each joint's acceleration limit, for the ``realistic`` actuator model
+    (:mod:`nehmo_core.sim.actuators`; None: not known)."""
+    accel_source: str = ""
+    """Where ``accel_limits`` come from (a document, a vendor library)."""
 
 
 @dataclass(frozen=True)
