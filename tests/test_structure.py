@@ -210,6 +210,7 @@ def test_test_files_mirror_the_packages_and_are_short() -> None:
 NOT_TUNABLE = {
     "opt/peer_bounds.py": {"FULL_SPEED"},  # the announcement of an arm that promises nothing
     "stages/self_clearance.py": {"MIN_GRADIENT"},  # a numerical floor of a row's gradient
+    "opt/tick.py": {"NO_PEERS"},  # the (empty) peer values of a tick without constrained peers
 }
 
 

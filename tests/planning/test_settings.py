@@ -35,7 +35,10 @@ def test_every_flat_name_of_earlier_releases_maps_to_a_setting() -> None:
 def test_paper_preset_turns_every_stage_off_and_nothing_else() -> None:
     paper, default = PlannerSettings.preset("paper"), PlannerSettings()
     changed = {k for k, v in paper.flat().items() if default.flat()[k] != v}
-    assert changed == set(PAPER_OPT)
+    # every stage is off in the preset; the ones off by default too (actuator) change nothing
+    assert all(paper.flat()[k] == v for k, v in PAPER_OPT.items())
+    assert changed == {k for k, v in PAPER_OPT.items() if default.flat()[k] != v}
+    assert not paper.actuator.enabled and not paper.contact.clearance
     assert not paper.escape.enabled and not paper.self_clearance.enabled
     assert paper.hold.bound == 1.0 and paper.exact_guard.gap == 0.0
     assert paper.silent_watch.lookahead == 0.0 and paper.fail_safe == default.fail_safe

@@ -40,7 +40,7 @@ from nehmo_core.planning.opt.pipeline import (
     read_tick,
 )
 from nehmo_core.planning.opt.problem import LinearRows, OptProblem, project_step
-from nehmo_core.planning.opt.tick import PeerValues, Tick
+from nehmo_core.planning.opt.tick import NO_PEERS, PeerValues, Tick
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.solvers.base import OptSolver, make_solver, ready_solver
 from nehmo_core.planning.stages import build_stages
@@ -234,6 +234,8 @@ class NehmoPlanner:
         if not self.pairs:
             y_max = s.opt.t_plan * s.opt.u_max * tick.cap
             u = self.keep_rows(np.clip(-tick.error0, -y_max, y_max) / s.opt.t_plan, tick.rows)
+            for command_filter in self._filters:  # no peer to guard against: they see none
+                u = command_filter.filter(tick, NO_PEERS, u)
             self._warm = u * s.opt.t_plan
             return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
         now = self.current(tick.q, tick.peers, tick.bounds)

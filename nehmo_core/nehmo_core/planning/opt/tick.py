@@ -12,7 +12,7 @@ import numpy as np
 from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.problem import LinearRows
 
-__all__ = ["PeerValues", "Tick"]
+__all__ = ["NO_PEERS", "PeerValues", "Tick"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,10 @@ class PeerValues:
     def critical(self) -> int:
         """Index of the peer with the smallest value."""
         return int(np.argmin(self.values))
+
+
+NO_PEERS = PeerValues([], [], [], np.zeros(0), [], np.zeros(0))
+"""The peer values of a tick with no constrained peer."""
 
 
 @dataclass

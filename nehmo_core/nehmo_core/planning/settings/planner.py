@@ -22,6 +22,7 @@ from nehmo_core.planning.settings.groups import (
 )
 from nehmo_core.planning.settings.spec import Rule
 from nehmo_core.planning.settings.stage_groups import (
+    ActuatorSettings,
     ContactSettings,
     EscapeSettings,
     ExactGuardSettings,
@@ -38,6 +39,7 @@ PAPER_OPT: Mapping[str, Any] = types.MappingProxyType(
         "hold.bound": 1.0,
         "exact_guard.gap": 0.0,
         "contact.clearance": 0.0,
+        "actuator.enabled": False,
         "silent_watch.lookahead": 0.0,
         "self_clearance.enabled": False,
         "escape.enabled": False,
@@ -113,6 +115,7 @@ class PlannerSettings:
     hold: HoldSettings = field(default_factory=HoldSettings)
     exact_guard: ExactGuardSettings = field(default_factory=ExactGuardSettings)
     contact: ContactSettings = field(default_factory=ContactSettings)
+    actuator: ActuatorSettings = field(default_factory=ActuatorSettings)
     silent_watch: SilentWatchSettings = field(default_factory=SilentWatchSettings)
     self_clearance: SelfClearanceSettings = field(default_factory=SelfClearanceSettings)
     escape: EscapeSettings = field(default_factory=EscapeSettings)

@@ -30,8 +30,9 @@ A value that breaks its rule is refused with the setting's name, the rule and th
 name of an earlier release (`hold_bound`) is refused with the name that replaced it.
 
 Groups: `opt` (the paper's problem Opt), `margins`, `solver`, `fail_safe`, and one group per
-stage beyond the paper (`hold`, `exact_guard`, `contact`, `silent_watch`, `self_clearance`,
-`escape`; what each stage does: [architecture.md](architecture.md), [planning.md](planning.md)).
+stage beyond the paper (`hold`, `exact_guard`, `contact`, `actuator`, `silent_watch`,
+`self_clearance`, `escape`; what each stage does: [architecture.md](architecture.md),
+[planning.md](planning.md)).
 """
 
 

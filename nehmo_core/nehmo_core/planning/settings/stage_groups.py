@@ -11,6 +11,7 @@ from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.settings.spec import check_group, setting
 
 __all__ = [
+    "ActuatorSettings",
     "ContactSettings",
     "EscapeSettings",
     "ExactGuardSettings",
@@ -117,6 +118,23 @@ class ContactSettings:
 
     def __post_init__(self) -> None:
         check_group(self, "contact")
+
+
+@dataclass(frozen=True)
+class ActuatorSettings:
+    """Commands within the joint acceleration limits (``planning/stages/accel_limits.py``).
+
+    Each command differs from the last by at most ``share`` of what each joint's acceleration
+    limit (the robot description's ``facts.accel_limits``) reaches in one ``opt.tick``.
+    """
+
+    enabled: bool = setting(
+        False, "keep each command within what the joints' acceleration limits reach in one tick"
+    )
+    share: float = setting(1.0, "share of the acceleration limits the commands may use", gt=0, le=1)
+
+    def __post_init__(self) -> None:
+        check_group(self, "actuator")
 
 
 @dataclass(frozen=True)

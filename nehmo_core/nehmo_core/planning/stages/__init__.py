@@ -14,6 +14,8 @@ stage (settings group)   kind                what it changes; what it keeps
 (:mod:`.stall_escape`)
 ``exact_guard``          command filter      shortens a step toward a holding peer's real
                                              geometry; never lengthens one
+``actuator``             row provider and    each command within what the joints' acceleration
+(:mod:`.accel_limits`)   command filter      limits reach in one tick; V rows stay
 ``contact``              command filter      within a few cm of a peer's real geometry: no step
 (:mod:`.contact_guard`)                      closes the gap; a blocked one turns up the real
                                              distance (only where the V rows are broken)
@@ -35,6 +37,7 @@ from nehmo_core.planning.opt.pipeline import (
     RowProvider,
     Stage,
 )
+from nehmo_core.planning.stages.accel_limits import AccelLimits
 from nehmo_core.planning.stages.contact_guard import ContactGuard
 from nehmo_core.planning.stages.exact_guard import ExactGuard
 from nehmo_core.planning.stages.self_clearance import SelfClearance
@@ -58,7 +61,9 @@ class Staged:
     def all(self) -> tuple[Stage, ...]:
         """Every stage."""
         head: tuple[Stage, ...] = () if self.announcer is None else (self.announcer,)
-        return (*head, *self.rows, *self.objectives, *self.filters)
+        # a stage of two kinds (actuator: rows and a filter) counts once
+        every = {id(s): s for s in (*head, *self.rows, *self.objectives, *self.filters)}
+        return tuple(every.values())
 
 
 def build_stages(host: Host) -> Staged:
@@ -69,17 +74,22 @@ def build_stages(host: Host) -> Staged:
         objectives.append(SilentPeers(host))
     if s.escape.enabled:
         objectives.append(StallEscape(host))
-    rows: tuple[RowProvider, ...] = ()
+    rows: list[RowProvider] = []
     if s.self_clearance.enabled:
-        rows = (SelfClearance(host.robot, s.self_clearance),)
+        rows.append(SelfClearance(host.robot, s.self_clearance))
+    accel = AccelLimits(host) if s.actuator.enabled and host.robot.facts.accel_limits else None
+    if accel is not None:
+        rows.append(accel)
     filters: list[CommandFilter] = []
     if s.exact_guard.gap > 0.0:
         filters.append(ExactGuard(host))
-    if s.contact.clearance > 0.0:  # last: it sees the command every other stage shaped
+    if s.contact.clearance > 0.0:  # it sees the command every stage before it shaped
         filters.append(ContactGuard(host))
+    if accel is not None:  # last: what is sent must be reachable
+        filters.append(accel)
     return Staged(
         announcer=HoldAnnouncer(host) if s.hold.bound < FULL_SPEED else None,
-        rows=rows,
+        rows=tuple(rows),
         objectives=tuple(objectives),
         filters=tuple(filters),
     )

@@ -1,0 +1,77 @@
+"""Commands the arm can follow: each joint's command changes by at most what its acceleration
+limit reaches in one tick.
+
+A row provider and a command filter (settings group ``actuator``; off by default and in the
+``paper`` preset). The paper's Opt assumes ``q̇ = u``: any command within ū takes effect at once,
+so its fail-safe flips every joint at full speed in one tick (a 1 rad/s step at ū = 0.5). A
+real joint follows a velocity command at most as fast as its acceleration limit ``a_j``
+(``facts.accel_limits`` of the robot's description) allows: a command it cannot reach is a plan
+it does not follow.
+
+The rows keep Opt's step ``y`` (held ``t_plan``) within
+``t_plan·(u_prev_j ± share·a_j·tick)``, where ``u_prev`` is this planner's last command; the
+fail-safe and an unconstrained step are projected onto them like every row provider's rows, so
+the fail-safe becomes the best reachable command toward its direction. The filter clips the
+final command to the same band (after the other filters, which may have shortened it) and
+remembers it. The V rows against every peer's worst case stay; a step the band excludes makes
+Opt infeasible, and then the fail-safe runs. Arms whose description gives no acceleration limits
+get neither rows nor clipping.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nehmo_core.planning.opt.pipeline import Host
+from nehmo_core.planning.opt.problem import LinearRows
+from nehmo_core.planning.opt.tick import PeerValues, Tick
+
+__all__ = ["AccelLimits"]
+
+
+class AccelLimits:
+    """The ``actuator`` row provider and command filter of one planner."""
+
+    name = "actuator"
+
+    def __init__(self, host: Host) -> None:
+        s = host.settings
+        limits = host.robot.facts.accel_limits
+        self.dof = host.robot.dof
+        self.t_plan = s.opt.t_plan
+        self.reach = (
+            None if limits is None else s.actuator.share * s.opt.tick * np.asarray(limits, float)
+        )  # [rad/s] the change of command one tick reaches, per joint
+        self.shortened = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """At rest: the last command is zero."""
+        self.last = np.zeros(self.dof)
+        self.shortened = 0
+
+    def close(self) -> None:
+        """It holds nothing."""
+
+    def band(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(low, high)`` [rad/s]: the commands reachable from the last one (None: no limits)."""
+        if self.reach is None:
+            return None
+        return self.last - self.reach, self.last + self.reach
+
+    def rows(self, q: np.ndarray) -> LinearRows:
+        """``y_j ≥ t_plan·low_j`` and ``−y_j ≥ −t_plan·high_j`` (no rows without limits)."""
+        band = self.band()
+        if band is None:
+            return LinearRows(np.zeros((0, self.dof)), np.zeros(0))
+        low, high = band
+        eye = np.eye(self.dof)
+        return LinearRows(np.vstack([eye, -eye]), np.concatenate([low, -high]) * self.t_plan)
+
+    def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
+        """``u`` clipped to the reachable band; remembered as the last command."""
+        band = self.band()
+        out = u if band is None else np.clip(u, *band)
+        self.shortened += not np.array_equal(out, u)
+        self.last = np.array(out, dtype=float)
+        return out
