@@ -73,8 +73,14 @@ def test_the_guard_keeps_the_floor_where_the_learned_rows_would_not(
     world: CellWorld, models: list
 ) -> None:
     # a settled floor of 1 mm lets the learned rows run the arm into the held peer's geometry
+    # (the contact guard, which would also stop it, is off: this is the exact guard's test)
     loose = PlannerSettings().override(
-        {"hold.settled_epsilon": 1e-3, "exact_guard.gap": 0.0, "escape.enabled": False}
+        {
+            "hold.settled_epsilon": 1e-3,
+            "exact_guard.gap": 0.0,
+            "escape.enabled": False,
+            "contact.clearance": 0.0,
+        }
     )
     unguarded, _ = _closest(world, loose, models)
     assert unguarded < FLOOR - 0.01

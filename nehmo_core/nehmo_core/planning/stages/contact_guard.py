@@ -30,16 +30,9 @@ from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.problem import project_step
 from nehmo_core.planning.opt.tick import PeerValues, Tick
-from nehmo_core.planning.stages.exact_guard import cell_world
+from nehmo_core.planning.stages.exact_guard import WorldFilter, closest
 
 __all__ = ["ContactGuard", "contact_step"]
-
-
-def _closest(
-    world: CellWorld, arm_id: str, x: np.ndarray, peers: list[str], cutoff: float
-) -> float:
-    world.set_joint_positions(arm_id, x)
-    return min(world.distance(arm_id, p, cutoff) for p in peers)
 
 
 def _fits(
@@ -55,7 +48,7 @@ def _fits(
     than ``now`` (0 if none)."""
     cutoff = now + 0.05
     for scale in scales:
-        ends = [_closest(world, arm_id, q + f * scale * step, peers, cutoff) for f in (1.0, 0.5)]
+        ends = [closest(world, arm_id, q + f * scale * step, peers, cutoff) for f in (1.0, 0.5)]
         if min(ends) >= now:
             return scale
     return 0.0
@@ -76,7 +69,7 @@ def contact_step(
     world.set_configuration(near)
     peers = list(near)
     clearance = s.contact.clearance
-    now = _closest(world, arm_id, q, peers, clearance + 0.01)
+    now = closest(world, arm_id, q, peers, clearance + 0.01)
     if now >= clearance:
         return u, False
     t = s.opt.t_plan
@@ -91,8 +84,8 @@ def contact_step(
         dq = np.zeros(len(q))
         dq[j] = h
         cutoff = now + 2 * h + 0.05
-        hi = _closest(world, arm_id, q + dq, peers, cutoff)
-        lo = _closest(world, arm_id, q - dq, peers, cutoff)
+        hi = closest(world, arm_id, q + dq, peers, cutoff)
+        lo = closest(world, arm_id, q - dq, peers, cutoff)
         grad[j] = (hi - lo) / (2 * h)
     peak = float(np.abs(grad).max())
     if peak < 1e-6:
@@ -105,23 +98,10 @@ def contact_step(
     return step * share / t, True
 
 
-class ContactGuard:
+class ContactGuard(WorldFilter):
     """The ``contact`` command filter of one planner."""
 
     name = "contact"
-
-    def __init__(self, host: Host) -> None:
-        self.host = host
-        self.shortened = 0
-        self._lease = cell_world(host.cell, self) if host.pairs else None
-
-    def close(self) -> None:
-        """Give the cell's world back (it closes with its last user)."""
-        if self._lease is not None:
-            self._lease.release()
-
-    def reset(self) -> None:
-        self.shortened = 0
 
     def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
         """``u``, or the contact step against the peers whose V reads below

@@ -20,7 +20,7 @@ One PyBullet world per cell is shared by the planners of a process that use it
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
@@ -32,7 +32,7 @@ from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
-__all__ = ["ExactGuard", "cell_world", "closer_than", "guard_step"]
+__all__ = ["ExactGuard", "WorldFilter", "cell_world", "closer_than", "closest", "guard_step"]
 
 
 def cell_world(cell: Cell, owner: object) -> Lease:
@@ -40,8 +40,8 @@ def cell_world(cell: Cell, owner: object) -> Lease:
     return WORLDS.lease(("cell", cell), lambda: CellWorld(cell), owner)
 
 
-def _closest(
-    world: CellWorld, arm_id: str, x: np.ndarray, peers: Mapping[str, np.ndarray], cutoff: float
+def closest(
+    world: CellWorld, arm_id: str, x: np.ndarray, peers: Iterable[str], cutoff: float
 ) -> float:
     """Arm ``arm_id`` posed at ``x``: its smallest distance [m] to ``peers`` (already posed)."""
     world.set_joint_positions(arm_id, x)
@@ -65,9 +65,9 @@ def guard_step(
         return 1.0
     cutoff = 2.0 * floor + 0.05
     world.set_configuration(held)
-    now = _closest(world, arm_id, q, held, cutoff)
+    now = closest(world, arm_id, q, held, cutoff)
     for scale in settings.exact_guard.scales:
-        ends = [_closest(world, arm_id, q + f * scale * step, held, cutoff) for f in (1.0, 0.5)]
+        ends = [closest(world, arm_id, q + f * scale * step, held, cutoff) for f in (1.0, 0.5)]
         if min(ends) >= min(floor, now):
             return scale
     return 0.0
@@ -84,13 +84,11 @@ def closer_than(
     if not peers or floor <= 0.0:
         return False
     world.set_configuration(peers)
-    return _closest(world, arm_id, q, peers, 2.0 * floor) < floor
+    return closest(world, arm_id, q, peers, 2.0 * floor) < floor
 
 
-class ExactGuard:
-    """The ``exact_guard`` command filter of one planner."""
-
-    name = "exact_guard"
+class WorldFilter:
+    """A command filter that checks the real geometry in the cell's shared PyBullet world."""
 
     def __init__(self, host: Host) -> None:
         self.host = host
@@ -105,6 +103,12 @@ class ExactGuard:
 
     def reset(self) -> None:
         self.shortened = 0
+
+
+class ExactGuard(WorldFilter):
+    """The ``exact_guard`` command filter of one planner."""
+
+    name = "exact_guard"
 
     def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
         """``u`` shortened by :func:`guard_step` against the peers near now that keep an
