@@ -227,12 +227,7 @@ class SimBridgeNode(Node):
             self.clock_pub.publish(clock)
             self.published["clock"] += 1
         # what sensors read (noisy with a realistic actuator model) and how fast each arm moves
-        observed = self.sim.observed() if not self.sim.ideal else self.sim.q
-        moving = (
-            {a: self.sim.trackers[a].velocity for a in velocities}
-            if not self.sim.ideal
-            else velocities
-        )
+        observed, moving = self.sim.observed(), self.sim.velocities(velocities)
         for a, pub in self.state_pubs.items():
             pub.publish(self._joint_state(a, observed[a], moving[a], t_ns))
         self.published["joint_states_per_arm"] += 1

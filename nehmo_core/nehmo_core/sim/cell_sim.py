@@ -156,6 +156,13 @@ class CellSimulator:
         """Every arm's true joint positions [rad]."""
         return {k: v.copy() for k, v in self.q.items()}
 
+    def velocities(self, commands: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The joint velocity [rad/s] each arm moves at after the last step: ``commands`` (what
+        was applied) for an ideal cell, each tracker's velocity otherwise."""
+        if self.ideal:
+            return dict(commands)
+        return {a: self.trackers[a].velocity.copy() for a in commands}
+
     def observed(self) -> dict[str, np.ndarray]:
         """Every arm's joint positions as its sensors read them (the actuator model's noise;
         the true positions for an ideal arm)."""

@@ -14,14 +14,15 @@ fail-safe and an unconstrained step are projected onto them like every row provi
 the fail-safe becomes the best reachable command toward its direction. The filter clips the
 final command to the same band (after the other filters, which may have shortened it) and
 remembers it. The V rows against every peer's worst case stay; a step the band excludes makes
-Opt infeasible, and then the fail-safe runs. Arms whose description gives no acceleration limits
-get neither rows nor clipping.
+Opt infeasible, and then the fail-safe runs. It is built only for arms whose description gives
+acceleration limits.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.problem import LinearRows
 from nehmo_core.planning.opt.tick import PeerValues, Tick
@@ -37,11 +38,13 @@ class AccelLimits:
     def __init__(self, host: Host) -> None:
         s = host.settings
         limits = host.robot.facts.accel_limits
+        if limits is None:
+            rule = f"needs facts.accel_limits in the description of robot {host.robot.name!r}"
+            raise InvalidValueError("actuator.enabled", rule, True)
         self.dof = host.robot.dof
         self.t_plan = s.opt.t_plan
-        self.reach = (
-            None if limits is None else s.actuator.share * s.opt.tick * np.asarray(limits, float)
-        )  # [rad/s] the change of command one tick reaches, per joint
+        # [rad/s] the change of command one tick reaches, per joint
+        self.reach = s.actuator.share * s.opt.tick * np.asarray(limits, dtype=float)
         self.shortened = 0
         self.reset()
 
@@ -53,25 +56,15 @@ class AccelLimits:
     def close(self) -> None:
         """It holds nothing."""
 
-    def band(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """``(low, high)`` [rad/s]: the commands reachable from the last one (None: no limits)."""
-        if self.reach is None:
-            return None
-        return self.last - self.reach, self.last + self.reach
-
     def rows(self, q: np.ndarray) -> LinearRows:
-        """``y_j ≥ t_plan·low_j`` and ``−y_j ≥ −t_plan·high_j`` (no rows without limits)."""
-        band = self.band()
-        if band is None:
-            return LinearRows(np.zeros((0, self.dof)), np.zeros(0))
-        low, high = band
+        """``y_j ≥ t_plan·(last_j − reach_j)`` and ``−y_j ≥ −t_plan·(last_j + reach_j)``."""
         eye = np.eye(self.dof)
+        low, high = self.last - self.reach, self.last + self.reach
         return LinearRows(np.vstack([eye, -eye]), np.concatenate([low, -high]) * self.t_plan)
 
     def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
-        """``u`` clipped to the reachable band; remembered as the last command."""
-        band = self.band()
-        out = u if band is None else np.clip(u, *band)
+        """``u`` clipped to the commands reachable from the last one; remembered as the last."""
+        out = np.clip(u, self.last - self.reach, self.last + self.reach)
         self.shortened += not np.array_equal(out, u)
         self.last = np.array(out, dtype=float)
         return out

@@ -55,17 +55,11 @@ def _fits(
 
 
 def contact_step(
-    world: CellWorld,
-    arm_id: str,
-    q: np.ndarray,
-    u: np.ndarray,
-    near: Mapping[str, np.ndarray],
-    host: Host,
-    tick: Tick,
+    world: CellWorld, host: Host, tick: Tick, u: np.ndarray, near: Mapping[str, np.ndarray]
 ) -> tuple[np.ndarray, bool]:
     """The command [rad/s] to send instead of ``u`` against the peers ``near`` (``{peer: q}``)
     and whether it differs from ``u``."""
-    s = host.settings
+    s, arm_id, q = host.settings, host.arm_id, tick.q
     world.set_configuration(near)
     peers = list(near)
     clearance = s.contact.clearance
@@ -112,8 +106,6 @@ class ContactGuard(WorldFilter):
         near = {p: tick.peers[p] for p, v in zip(now.ids, now.values, strict=True) if v < value}
         if not near:
             return u
-        out, changed = contact_step(
-            self._lease.world, self.host.arm_id, tick.q, u, near, self.host, tick
-        )
+        out, changed = contact_step(self._lease.world, self.host, tick, u, near)
         self.shortened += changed
         return out
