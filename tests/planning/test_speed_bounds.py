@@ -80,8 +80,8 @@ def test_an_arm_at_its_goal_announces_and_keeps_its_bound(models: list) -> None:
 
 
 def test_an_arm_pushed_off_its_goal_keeps_its_bound_until_hold_release(models: list) -> None:
-    settings = PlannerSettings().override(
-        {"hold.bound": 0.2, "hold.release": 0.3, "opt.deadline": 3600.0}
+    settings = PlannerSettings().override(  # pushed: moved, not its motion (no self-check)
+        {"hold.bound": 0.2, "hold.release": 0.3, "opt.deadline": 3600.0, "hold.self_check": False}
     )
     planner = NehmoPlanner(CELL, OWN, models, settings)
     goal = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
@@ -96,6 +96,38 @@ def test_an_arm_pushed_off_its_goal_keeps_its_bound_until_hold_release(models: l
     # kept beyond twice the tolerance (0.1 rad), withdrawn beyond 0.3 rad, and made anew only
     # back within the tolerance
     assert seen == [0.2, 0.2, 0.2, 1.0, 1.0, 0.2]
+
+
+@pytest.mark.parametrize("self_check", [True, False])
+def test_an_arm_that_broke_its_bound_withdraws_it_once_and_is_trusted_again(
+    models: list, self_check: bool
+) -> None:
+    """An arm braking into its goal (acceleration-limited) moves 3 cm in a tick after it
+    announced 0.2: with the self-check it withdraws for one tick and its peers trust its renewed
+    bound; without it, its peers distrust it for good."""
+    settings = PlannerSettings().override(
+        {"hold.bound": 0.2, "opt.deadline": 3600.0, "hold.self_check": self_check}
+    )
+    planner = NehmoPlanner(CELL, OWN, models, settings)
+    goal = np.array([np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
+    far = {PEER: goal.copy()}  # both arms turned away
+    peers_view = PeerBounds(D)  # what the peers hear and see, in the episode loop's order
+    offsets = [0.0, 0.0, 0.0, 0.03, 0.03, 0.031, 0.031, 0.031]
+    announced = []
+    for k, off in enumerate(offsets):
+        q = goal + np.array([off, 0, 0, 0, 0, 0])
+        peers_view.observe(OWN, k * DT, q)
+        result = planner.plan(q, far, goal)
+        assert np.abs(result.velocity).max() <= 0.2 * 0.5 + 1e-12  # the cap never lifts
+        announced.append(result.telemetry.speed_bound)
+        peers_view.announce(OWN, result.telemetry.speed_bound)
+    assert peers_view.breaches(OWN) == 1
+    if self_check:
+        assert announced == [0.2, 0.2, 0.2, 1.0, 0.2, 0.2, 0.2, 0.2]
+        assert peers_view.bound(OWN) == 0.2 and planner.stage("hold").withdrawals == 1
+    else:
+        assert announced == [0.2] * len(offsets)
+        assert peers_view.bound(OWN) == 1.0
 
 
 def test_a_release_inside_the_hold_tolerance_is_rejected() -> None:

@@ -34,12 +34,13 @@ from nehmo_core.planning.opt.pipeline import (
     CommandFilter,
     Fallback,
     Objective,
+    PeerRowProvider,
     RowProvider,
     Stage,
     peer_vectors,
     read_tick,
 )
-from nehmo_core.planning.opt.problem import LinearRows, OptProblem, project_step
+from nehmo_core.planning.opt.problem import LinearRows, OptProblem, project_step, stack_rows
 from nehmo_core.planning.opt.tick import NO_PEERS, PeerValues, Tick
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.solvers.base import OptSolver, make_solver, ready_solver
@@ -78,6 +79,7 @@ class NehmoPlanner:
         self.stages: tuple[Stage, ...] = staged.all
         self._announcer: Announcer | None = staged.announcer
         self._row_providers: tuple[RowProvider, ...] = staged.rows
+        self._peer_rows: tuple[PeerRowProvider, ...] = staged.peer_rows
         self._objectives: tuple[Objective, ...] = staged.objectives
         self._filters: tuple[CommandFilter, ...] = staged.filters
         self._fallback: Fallback = HjiFailSafe(self.robot.dof, s.fail_safe.deadband)
@@ -162,8 +164,7 @@ class NehmoPlanner:
             return None
         if len(self._row_providers) == 1:
             return self._row_providers[0].rows(q)
-        parts = [p.rows(q) for p in self._row_providers]
-        return LinearRows(np.vstack([r.A for r in parts]), np.concatenate([r.b for r in parts]))
+        return stack_rows(*(p.rows(q) for p in self._row_providers))
 
     def keep_rows(self, u: np.ndarray, rows: LinearRows | None) -> np.ndarray:
         """``u`` [rad/s], or the nearest command whose step keeps ``rows``."""
@@ -239,6 +240,7 @@ class NehmoPlanner:
             self._warm = u * s.opt.t_plan
             return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
         now = self.current(tick.q, tick.peers, tick.bounds)
+        tick.rows = stack_rows(tick.rows, *(p.peer_rows(tick, now) for p in self._peer_rows))
         target = self._target(tick, now)
         problem = self.problem(target, now, tick.rows, tick.cap)
         result, status = self._solve(problem, deadline)

@@ -15,7 +15,8 @@ carries one arm's commands out under it.
 Named models (:data:`ACTUATOR_MODELS`): ``ideal`` is today's simulator exactly (the paper's
 tables keep it); ``realistic`` takes each joint's acceleration limit from the robot's
 description (``facts.accel_limits``, with the source stated there), :data:`REALISTIC_LATENCY`
-and :data:`REALISTIC_NOISE`.
+and :data:`REALISTIC_NOISE`; ``limits`` has the same acceleration limits and neither latency nor
+noise (the part of ``realistic`` that changes outcomes; a deterministic closed loop).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ __all__ = [
     "cell_actuators",
 ]
 
-ACTUATOR_MODELS = ("ideal", "realistic")
+ACTUATOR_MODELS = ("ideal", "realistic", "limits")
 REALISTIC_LATENCY = 0.012
 """[s] Command latency of the ``realistic`` model: a few control cycles of a UR controller
 (125–500 Hz) plus a DDS hop."""
@@ -84,23 +85,25 @@ class ActuatorModel:
 
 
 def actuator_model(name: str, robot: RobotModel) -> ActuatorModel:
-    """The named model (:data:`ACTUATOR_MODELS`) for ``robot``; ``realistic`` needs the
-    robot's acceleration limits in its description."""
+    """The named model (:data:`ACTUATOR_MODELS`) for ``robot``; ``realistic`` and ``limits``
+    need the robot's acceleration limits in its description."""
     if name == "ideal":
         return ActuatorModel()
-    if name != "realistic":
+    if name not in ACTUATOR_MODELS:
         raise UnknownNameError("actuator model", name, ACTUATOR_MODELS)
     accel = robot.facts.accel_limits
     if accel is None:
         raise InvalidValueError(
             "actuators",
-            f"'realistic' needs facts.accel_limits in the description of robot {robot.name!r}",
+            f"{name!r} needs facts.accel_limits in the description of robot {robot.name!r}",
             name,
         )
     if len(accel) != robot.dof:
         raise InvalidValueError(
             f"{robot.name}: facts.accel_limits", f"must give all {robot.dof} joints", accel
         )
+    if name == "limits":
+        return ActuatorModel("limits", tuple(accel))
     return ActuatorModel("realistic", tuple(accel), REALISTIC_LATENCY, REALISTIC_NOISE)
 
 

@@ -8,6 +8,8 @@ may drop or weaken the V rows against a peer's worst case:
 * :class:`Announcer`: the speed bound this arm announces, and the share of ū its commands keep;
 * :class:`RowProvider`: linear rows ``A·y ≥ b`` on the step besides the V rows (the fail-safe and
   an unconstrained step are projected onto them too);
+* :class:`PeerRowProvider`: linear rows that depend on this tick's peer values (added once the
+  peers are evaluated, so an unconstrained step and the fail-safe computed ahead do not see them);
 * :class:`Objective`: a target that replaces the goal in Opt's cost for a tick (the constraints
   stay as they are);
 * :class:`CommandFilter`: shortens the command after the solve or the fail-safe;
@@ -41,6 +43,7 @@ __all__ = [
     "Fallback",
     "Host",
     "Objective",
+    "PeerRowProvider",
     "RowProvider",
     "Stage",
     "peer_vectors",
@@ -114,6 +117,12 @@ class Announcer(Stage, Protocol):
 class RowProvider(Stage, Protocol):
     def rows(self, q: np.ndarray) -> LinearRows:
         """The rows ``A·y ≥ b`` on the step from joint vector ``q``."""
+        ...
+
+
+class PeerRowProvider(Stage, Protocol):
+    def peer_rows(self, tick: Tick, now: PeerValues) -> LinearRows | None:
+        """Rows ``A·y ≥ b`` on the step from this tick's peer values (``y = 0`` keeps them)."""
         ...
 
 

@@ -26,7 +26,14 @@ import numpy as np
 from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.numerics.qp import qp_step
 
-__all__ = ["Constraints", "LinearRows", "OptProblem", "project_step", "worst_case_disturbance"]
+__all__ = [
+    "Constraints",
+    "LinearRows",
+    "OptProblem",
+    "project_step",
+    "stack_rows",
+    "worst_case_disturbance",
+]
 
 
 def worst_case_disturbance(grad_peer: np.ndarray, d_max: float) -> np.ndarray:
@@ -47,6 +54,14 @@ class LinearRows:
 
     def satisfied(self, y: np.ndarray, tol: float = 1e-9) -> bool:
         return bool(np.all(self.A @ y >= self.b - tol))
+
+
+def stack_rows(*parts: LinearRows | None) -> LinearRows | None:
+    """The rows of every part that is not None, in order (None if there are none)."""
+    kept = [p for p in parts if p is not None]
+    if len(kept) <= 1:
+        return kept[0] if kept else None
+    return LinearRows(np.vstack([r.A for r in kept]), np.concatenate([r.b for r in kept]))
 
 
 def project_step(target: np.ndarray, rows: LinearRows, y_max: float) -> np.ndarray:

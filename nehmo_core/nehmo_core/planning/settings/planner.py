@@ -54,6 +54,8 @@ PRESETS: Mapping[str, Mapping[str, Any]] = types.MappingProxyType(
         "paper": PAPER_OPT,
         "ipopt": {"solver.name": "ipopt"},
         "wrapped_goal": {"opt.wrap_goal": True},
+        # for arms that follow commands under acceleration limits (docs/evaluation.md)
+        "real_actuators": {"actuator.enabled": True, "hold.self_check": True},
     }
 )
 
@@ -128,8 +130,8 @@ class PlannerSettings:
 
     @classmethod
     def preset(cls, name: str, overrides: Mapping[str, Any] | None = None) -> PlannerSettings:
-        """Named settings (``default``, ``paper``, ``ipopt``, ``wrapped_goal``) with dotted
-        overrides on top."""
+        """Named settings (``default``, ``paper``, ``ipopt``, ``wrapped_goal``,
+        ``real_actuators``) with dotted overrides on top."""
         if name not in PRESETS:
             raise UnknownNameError("planner preset", name, PRESETS)
         return cls().override({**PRESETS[name], **(overrides or {})})

@@ -46,6 +46,14 @@ class HoldSettings:
     release_ticks: int = setting(
         2, "commands between announcing a withdrawal and moving faster", ge=1
     )
+    # an acceleration-limited arm braking into its goal moved faster than its new bound, and its
+    # peers planned it at full speed for the rest of the episode (triple UR5, realistic
+    # actuators, development seed 60: SR 80 -> 91 %); off by default: trusted again, a holding
+    # peer is approached at full speed, which an arm that brakes slowly needs the actuator
+    # stage's approach rows for (one collision in those 100 episodes without them)
+    self_check: bool = setting(
+        False, "withdraw and renew a bound this arm's own observed motion broke, as peers judge it"
+    )
     # with certified margins, rows against a peer that announced a bound keep min(raised
     # epsilon, max(settled_epsilon, their model's δ at bound·t_safe)); 1 cm, the exact guard's
     # gap (0.05 m before the guard: a learned distance may read 3 cm at contact; 2 cm until
@@ -128,13 +136,22 @@ class ActuatorSettings:
     """Commands within the joint acceleration limits (``planning/stages/accel_limits.py``).
 
     Each command differs from the last by at most ``share`` of what each joint's acceleration
-    limit (the robot description's ``facts.accel_limits``) reaches in one ``opt.tick``.
+    limit (the robot description's ``facts.accel_limits``) reaches in one ``opt.tick``, and V
+    against each peer falls no faster than ``approach_rate`` times its gap above the margin.
     """
 
     enabled: bool = setting(
         False, "keep each command within what the joints' acceleration limits reach in one tick"
     )
     share: float = setting(1.0, "share of the acceleration limits the commands may use", gt=0, le=1)
+    # an arm closing at 2 cm of V per tick on a holding peer (1 cm margin) took four ticks to
+    # brake and touched it (triple UR5, realistic actuators, development seed 60)
+    approach_rate: float = setting(
+        4.0,
+        "V may fall at most this times its gap above the margin per second (0: off)",
+        "1/s",
+        ge=0,
+    )
 
     def __post_init__(self) -> None:
         check_group(self, "actuator")

@@ -14,8 +14,9 @@ stage (settings group)   kind                what it changes; what it keeps
 (:mod:`.stall_escape`)
 ``exact_guard``          command filter      shortens a step toward a holding peer's real
                                              geometry; never lengthens one
-``actuator``             row provider and    each command within what the joints' acceleration
-(:mod:`.accel_limits`)   command filter      limits reach in one tick; V rows stay
+``actuator``             row provider, peer  each command within what the joints' acceleration
+(:mod:`.accel_limits`)   rows and command    limits reach in one tick, and closing on a peer
+                         filter              no faster than the gap allows; V rows stay
 ``contact``              command filter      within a few cm of a peer's real geometry: no step
 (:mod:`.contact_guard`)                      closes the gap; a blocked one turns up the real
                                              distance (only where the V rows are broken)
@@ -34,6 +35,7 @@ from nehmo_core.planning.opt.pipeline import (
     CommandFilter,
     Host,
     Objective,
+    PeerRowProvider,
     RowProvider,
     Stage,
 )
@@ -54,6 +56,7 @@ class Staged:
 
     announcer: Announcer | None
     rows: tuple[RowProvider, ...]
+    peer_rows: tuple[PeerRowProvider, ...]
     objectives: tuple[Objective, ...]
     filters: tuple[CommandFilter, ...]
 
@@ -62,7 +65,8 @@ class Staged:
         """Every stage."""
         head: tuple[Stage, ...] = () if self.announcer is None else (self.announcer,)
         # a stage of two kinds (actuator: rows and a filter) counts once
-        every = {id(s): s for s in (*head, *self.rows, *self.objectives, *self.filters)}
+        kinds = (*head, *self.rows, *self.peer_rows, *self.objectives, *self.filters)
+        every = {id(s): s for s in kinds}
         return tuple(every.values())
 
 
@@ -90,6 +94,7 @@ def build_stages(host: Host) -> Staged:
     return Staged(
         announcer=HoldAnnouncer(host) if s.hold.bound < FULL_SPEED else None,
         rows=tuple(rows),
+        peer_rows=(accel,) if accel is not None and s.actuator.approach_rate > 0 else (),
         objectives=tuple(objectives),
         filters=tuple(filters),
     )

@@ -16,6 +16,12 @@ final command to the same band (after the other filters, which may have shortene
 remembers it. The V rows against every peer's worst case stay; a step the band excludes makes
 Opt infeasible, and then the fail-safe runs. It is built only for arms whose description gives
 acceleration limits.
+
+An arm that cannot stop at once must not close on a peer faster than it can brake before the
+margin. With ``approach_rate`` γ the stage adds one row per peer, linear in the step:
+``∇_{q_own}V·y ≥ −γ·t_plan·max(V − margin, 0)``: V may fall at most γ times its gap per second,
+so the arm slows down as the gap closes (γ·(braking time) below one keeps the approach from
+overshooting). A step of zero keeps the rows.
 """
 
 from __future__ import annotations
@@ -41,7 +47,9 @@ class AccelLimits:
         if limits is None:
             rule = f"needs facts.accel_limits in the description of robot {host.robot.name!r}"
             raise InvalidValueError("actuator.enabled", rule, True)
+        self.host = host
         self.dof = host.robot.dof
+        self.rate = s.actuator.approach_rate
         self.t_plan = s.opt.t_plan
         # [rad/s] the change of command one tick reaches, per joint
         self.reach = s.actuator.share * s.opt.tick * np.asarray(limits, dtype=float)
@@ -61,6 +69,17 @@ class AccelLimits:
         eye = np.eye(self.dof)
         low, high = self.last - self.reach, self.last + self.reach
         return LinearRows(np.vstack([eye, -eye]), np.concatenate([low, -high]) * self.t_plan)
+
+    def peer_rows(self, tick: Tick, now: PeerValues) -> LinearRows | None:
+        """``∇_{q_own}V_i·y ≥ −γ·t_plan·max(V_i − margin_i, 0)`` for each peer ``i``."""
+        if not now.ids:
+            return None
+        grads = np.array([g[: self.dof] for g in now.grads])
+        margins = np.array(
+            [self.host.group_margin(m, b) for m, b in zip(now.model_index, now.bounds, strict=True)]
+        )
+        gaps = np.maximum(now.values - margins, 0.0)
+        return LinearRows(grads, -self.rate * self.t_plan * gaps)
 
     def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
         """``u`` clipped to the commands reachable from the last one; remembered as the last."""

@@ -18,6 +18,14 @@ Either is a threat within ``exact_guard`` of the real geometry
 (:func:`nehmo_core.planning.stages.exact_guard.closer_than`). Either way the settled arm
 withdraws to flee at full speed. The price that remains: the two commands before the arm may
 speed up.
+
+An arm keeps only the bound its joints follow: one whose acceleration is limited may still move
+faster than ``k·ū`` for a few ticks after it announces (it was braking into its goal), and its
+peers then distrust it until it withdraws
+(:class:`~nehmo_core.planning.opt.peer_bounds.PeerBounds`).
+With ``hold.self_check`` the arm applies its peers' check to its own observed motion; the tick it
+would fail, it announces full speed (a withdrawal, its commands stay within ``k·ū``) and announces
+its bound anew from the next tick, so its peers trust it again once it moves slowly.
 """
 
 from __future__ import annotations
@@ -26,7 +34,7 @@ from collections import deque
 
 import numpy as np
 
-from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
+from nehmo_core.planning.opt.peer_bounds import FULL_SPEED, PeerBounds
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.tick import Tick
 from nehmo_core.planning.stages.exact_guard import cell_world, closer_than
@@ -56,6 +64,10 @@ class HoldAnnouncer:
         # this arm's recent announcements (newest last); its commands keep the smallest
         self._announced = deque([FULL_SPEED], maxlen=self.settings.hold.release_ticks + 1)
         self.holding = False  # settled at the goal, announcing hold_bound
+        # this arm's own announcements checked against its own observed motion, as its peers do
+        self._own = PeerBounds(self.settings.opt.d_max)
+        self._clock = 0.0  # [s] plan() calls times the tick period
+        self.withdrawals = 0  # announcements withdrawn because this arm broke them
 
     @property
     def announcement(self) -> float:
@@ -78,8 +90,23 @@ class HoldAnnouncer:
         elif e <= s.hold.tolerance:
             self.holding = True
         tick.announced = s.hold.bound if self.holding else FULL_SPEED
+        if s.hold.self_check:
+            tick.announced = self._checked(tick.q, tick.announced)
         self._announced.append(tick.announced)
         tick.cap = self.speed_cap
+
+    def _checked(self, q: np.ndarray, bound: float) -> float:
+        """``bound``, or full speed (a withdrawal) if this arm's motion since the last tick broke
+        what it announced, judged as its peers judge it."""
+        me = self.host.arm_id
+        self._clock += self.settings.opt.tick
+        self._own.observe(me, self._clock, q)
+        broken = self._announced[-1] < FULL_SPEED and self._own.bound(me) >= FULL_SPEED
+        if bound < FULL_SPEED and broken:  # withdrawn now, announced anew next tick
+            self.withdrawals += 1
+            bound = FULL_SPEED
+        self._own.announce(me, bound)
+        return bound
 
     def threatened(self, tick: Tick) -> bool:
         """Whether a peer at full speed has broken the slow game with this arm near its goal:
