@@ -1,8 +1,10 @@
 """Certificates in model cards: where a shipped model's card is, how a certificate enters it.
 
 A value function's card (the JSON beside its weights) keeps its certificates under
-``card.certificates``: one entry per (τ, distribution), the newest replacing an older one. The
-planner reads them back (:func:`certified_level`) to set its margin ε.
+``card.certificates``: one entry per (τ, distribution, actuator model), the newest replacing an
+older one. Each says which actuator model its rollouts assumed (``actuators``; an entry without
+one was made with ideal tracking). The planner reads them back (:func:`certified_level`) to set
+its margin ε.
 """
 
 from __future__ import annotations
@@ -42,11 +44,18 @@ def _summary(cert: Certificate) -> dict[str, Any]:
     s = data["settings"]
     out["alpha"], out["beta"] = s["alpha"], s["beta"]
     out["adversaries"], out["dt"], out["seed"] = s["adversaries"], s["dt"], s["seed"]
+    out["actuators"] = s.get("actuator") or {"name": "ideal"}
     return out
 
 
+def actuators_of(certificate: dict[str, Any]) -> str:
+    """The name of the actuator model a card's certificate holds for (``ideal`` if unstated)."""
+    return str((certificate.get("actuators") or {}).get("name", "ideal"))
+
+
 def record_certificate(card_path: Path, cert: Certificate) -> None:
-    """Add ``cert`` to ``card.certificates``, replacing one of the same τ and distribution."""
+    """Add ``cert`` to ``card.certificates``, replacing one of the same τ, distribution and
+    actuator model."""
     meta = json.loads(card_path.read_text())
     card = meta.setdefault("card", {})
     entry = _summary(cert)
@@ -56,21 +65,29 @@ def record_certificate(card_path: Path, cert: Certificate) -> None:
         if not (
             abs(c["tau"] - cert.tau) < 1e-9
             and c["distribution"]["name"] == cert.distribution["name"]
+            and actuators_of(c) == actuators_of(entry)
         )
     ]
     card["certificates"] = sorted(
-        [*kept, entry], key=lambda c: (c["tau"], c["distribution"]["name"])
+        [*kept, entry], key=lambda c: (c["tau"], c["distribution"]["name"], actuators_of(c))
     )
     card_path.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
 
 
-def certified_level(card: dict[str, Any], tau: float) -> tuple[float, list[dict[str, Any]]] | None:
-    """The largest certified ``δ`` among a card's certificates at ``τ`` and those certificates.
+def certified_level(
+    card: dict[str, Any], tau: float, actuators: str = "ideal"
+) -> tuple[float, list[dict[str, Any]]] | None:
+    """The largest certified ``δ`` among a card's certificates at ``τ`` for actuator model
+    ``actuators`` and those certificates.
 
-    None when the card holds no certificate at ``τ``. A certificate that failed its target still
+    None when the card holds no such certificate. A certificate that failed its target still
     counts with its ``δ`` (the level tried last), so the planner never trusts less than it.
     """
-    found = [c for c in card.get("certificates", []) if abs(c["tau"] - tau) < 1e-6]
+    found = [
+        c
+        for c in card.get("certificates", [])
+        if abs(c["tau"] - tau) < 1e-6 and actuators_of(c) == actuators
+    ]
     if not found:
         return None
     return max(c["delta"] for c in found), found

@@ -27,6 +27,7 @@ import numpy as np
 from tqdm import tqdm
 
 from nehmo_core.errors import InvalidValueError
+from nehmo_core.sim.actuators import ActuatorModel
 from nehmo_core.verify.adversaries import (
     DEFAULT_ADVERSARIES,
     check_adversaries,
@@ -58,6 +59,8 @@ class VerifySettings:
     adversaries: tuple[str, ...] = DEFAULT_ADVERSARIES
     seed: int = 0
     chunk: int = 250  # states per rollout batch
+    # how the controlled arm follows its control in the rollouts (None: ideal, q̇ = u)
+    actuator: ActuatorModel | None = None
 
     def __post_init__(self) -> None:
         positive = ("tau", "dt", "delta_max", "delta_step")
@@ -123,6 +126,7 @@ def _chunk_margins(
     chunk: np.ndarray,
     settings: VerifySettings,
     rng_state: dict[str, Any],
+    noise_seed: int = 0,
 ) -> tuple[np.ndarray, list[str]]:
     """One chunk's worst margins on a worker (the value function and margin kept between
     chunks); ``rng_state`` is the driver's generator where this chunk's adversaries are drawn."""
@@ -136,7 +140,21 @@ def _chunk_margins(
     rng = np.random.default_rng()
     rng.bit_generator.state = rng_state
     adv = make_adversaries(value.system, settings.adversaries, chunk.shape[0], settings.dt, rng)
-    return rollout_worst(value, margin, chunk, settings.tau, adv, settings.dt)
+    return _rollouts(value, margin, chunk, settings, adv, noise_seed)
+
+
+def _rollouts(
+    value: ValueModel,
+    margin: ExactMargin,
+    chunk: np.ndarray,
+    s: VerifySettings,
+    adversaries: list[Any],
+    noise_seed: int,
+) -> tuple[np.ndarray, list[str]]:
+    seed = s.seed * 1_000_003 + noise_seed  # a noise stream per run and chunk
+    return rollout_worst(
+        value, margin, chunk, s.tau, adversaries, s.dt, actuator=s.actuator, noise_seed=seed
+    )
 
 
 def worst_margins(
@@ -163,7 +181,7 @@ def worst_margins(
             make_adversaries(value.system, settings.adversaries, chunk.shape[0], settings.dt, rng)
             futures.append(
                 remote.executor.submit(
-                    _chunk_margins, remote.model, remote.variant, chunk, settings, state
+                    _chunk_margins, remote.model, remote.variant, chunk, settings, state, i
                 )
             )
         for future in tqdm(futures, desc=label, unit="batch", leave=False):
@@ -174,7 +192,7 @@ def worst_margins(
     for i in tqdm(starts, desc=label, unit="batch", leave=False):
         chunk = x[i : i + settings.chunk]
         adv = make_adversaries(value.system, settings.adversaries, chunk.shape[0], settings.dt, rng)
-        m, who = rollout_worst(value, margin, chunk, settings.tau, adv, settings.dt)
+        m, who = _rollouts(value, margin, chunk, settings, adv, i)
         margins.append(m)
         names.extend(who)
     return np.concatenate(margins), names

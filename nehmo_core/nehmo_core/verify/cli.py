@@ -14,12 +14,14 @@ import argparse
 import json
 import shlex
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from nehmo_core.cluster import make_executor, parse_cluster
 from nehmo_core.errors import InvalidValueError, as_options
 from nehmo_core.hjr import load_value_function
 from nehmo_core.hjr.systems import ArmPairSystem, HJISystem
+from nehmo_core.sim.actuators import ACTUATOR_MODELS, ActuatorModel, actuator_model
 from nehmo_core.verify.adversaries import ADVERSARIES, DEFAULT_ADVERSARIES
 from nehmo_core.verify.cards import record_certificate, shipped_card_path
 from nehmo_core.verify.certify import RemoteRollouts, VerifySettings, certify
@@ -30,7 +32,7 @@ from nehmo_core.verify.distributions import (
     visited_pair_states,
 )
 from nehmo_core.verify.report import certificate_markdown, certificate_stem
-from nehmo_core.verify.truth import exact_margin
+from nehmo_core.verify.truth import exact_margin, pair_arms
 
 __all__ = ["add_arguments", "run"]
 
@@ -71,6 +73,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--dt", type=float, default=0.01, help="rollout step [s]")
     parser.add_argument(
+        "--actuators",
+        choices=ACTUATOR_MODELS,
+        default="ideal",
+        help="how the controlled arm follows its control in the rollouts (the arm's actuator "
+        "model from its description; each rollout starts reversing at full speed); recorded in "
+        "the certificate",
+    )
+    parser.add_argument(
         "--adversaries",
         default=",".join(DEFAULT_ADVERSARIES),
         help=f"comma-separated subset of {list(ADVERSARIES)}",
@@ -100,6 +110,16 @@ def _distribution(args: argparse.Namespace, system: HJISystem) -> StateDistribut
     return visited_pair_states(system, episode_logs(args.logs))
 
 
+def _actuator(name: str, system: HJISystem) -> ActuatorModel | None:
+    """The controlled arm's actuator model (None: ideal)."""
+    if name == "ideal":
+        return None
+    if not isinstance(system, ArmPairSystem):
+        raise InvalidValueError("--actuators", "needs an arm pair model", name)
+    cell, arm, _ = pair_arms(system.name)
+    return actuator_model(name, cell.arm(arm).robot)
+
+
 def run(args: argparse.Namespace) -> int:
     with as_options(_OPTIONS):
         settings = VerifySettings(
@@ -119,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
     if settings.tau > value.system.horizon:
         raise InvalidValueError("--tau", f"must lie in (0, {value.system.horizon}]", settings.tau)
     distribution = _distribution(args, value.system)
+    settings = replace(settings, actuator=_actuator(args.actuators, value.system))
     margin = exact_margin(value.system)
     variant = args.variant or value.variant
     cluster = parse_cluster(args.cluster)
@@ -136,12 +157,15 @@ def run(args: argparse.Namespace) -> int:
         sys.argv[2:] if sys.argv[1:2] == ["verify"] else sys.argv[1:]
     )
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = certificate_stem(cert.system, variant, cert.distribution["name"], cert.tau)
+    stem = certificate_stem(
+        cert.system, variant, cert.distribution["name"], cert.tau, args.actuators
+    )
     (args.out / f"{stem}.json").write_text(json.dumps(cert.to_dict(), indent=2) + "\n")
     (args.out / f"{stem}.md").write_text(certificate_markdown(cert))
     verdict = "certified" if cert.certified else "NOT certified"
     print(
-        f"{cert.system} ({variant}) τ={cert.tau:g} s, {cert.distribution['name']}: "
+        f"{cert.system} ({variant}) τ={cert.tau:g} s, {cert.distribution['name']}, "
+        f"{args.actuators} actuators: "
         f"δ = {cert.delta:.3f} m, {cert.violations}/{cert.samples} violations, "
         f"ε ≤ {cert.epsilon:.4f} at {cert.confidence:.3f} ({verdict} at α = {settings.alpha}); "
         f"{cert.wall_time_s:.0f} s"

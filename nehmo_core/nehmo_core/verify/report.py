@@ -8,9 +8,23 @@ from typing import Any
 from nehmo_core.verify.certify import Certificate
 
 
-def certificate_stem(system: str, variant: str, distribution: str, tau: float) -> str:
-    """The file name (without suffix) of a certificate's JSON and Markdown."""
-    return f"{system}_{variant.replace('+', '_')}_{distribution}_tau{tau:g}"
+def certificate_stem(
+    system: str, variant: str, distribution: str, tau: float, actuators: str = "ideal"
+) -> str:
+    """The file name (without suffix) of a certificate's JSON and Markdown (the actuator model
+    named unless ideal)."""
+    tail = "" if actuators == "ideal" else f"_{actuators}"
+    return f"{system}_{variant.replace('+', '_')}_{distribution}_tau{tau:g}{tail}"
+
+
+def _tracking(settings: dict[str, Any]) -> str:
+    a = settings.get("actuator")
+    if not a:
+        return "ideal (q̇ = u)"
+    return (
+        f"{a['name']}: acceleration limits {a['accel']} rad/s², latency {a['latency']} s, "
+        f"state noise {a['noise']} rad; each rollout starts reversing at full speed"
+    )
 
 
 def certificate_markdown(cert: Certificate) -> str:
@@ -30,6 +44,7 @@ def certificate_markdown(cert: Certificate) -> str:
         "",
         f"- distribution: {cert.distribution['what']}",
         f"- adversaries: {', '.join(s['adversaries'])}; rollout step {s['dt']} s; seed {s['seed']}",
+        f"- the arm's tracking in the rollouts: {_tracking(s)}",
         f"- search: {cert.search['states']} states with V ≥ 0, {cert.search['violations_at_0']} "
         f"violations, δ found {cert.search['delta']:.4f} m",
         f"- wall time: {cert.wall_time_s:.0f} s",

@@ -34,12 +34,14 @@ class CertifiedMargins:
         settled_epsilon: float,
         t_safe: float,
         certified: bool = True,
+        actuators: str = "ideal",
     ) -> None:
         self.models = list(models)
         self.floor = epsilon
         self.settled_floor = settled_epsilon
         self.t_safe = t_safe
         self.certified = certified
+        self.actuators = actuators  # the actuator model whose certificates count
         self.epsilon, self.source = self._reported(sorted(set(used)))
         self._cache: dict[tuple[int, float], float] = {}
 
@@ -47,12 +49,23 @@ class CertifiedMargins:
         """The reported ε and a line saying where it came from."""
         if not self.certified:
             return self.floor, f"ε = {self.floor:g} m, fixed"
-        levels = {self.models[i].name: self.models[i].certified_level(self.t_safe) for i in used}
+        levels = {
+            self.models[i].name: self.models[i].certified_level(self.t_safe, self.actuators)
+            for i in used
+        }
         certified = {name: d for name, d in levels.items() if d is not None}
         missing = sorted(name for name, d in levels.items() if d is None)
         epsilon = max([self.floor, *certified.values()])
         deltas = ", ".join(f"{name} {d:.4g}" for name, d in sorted(certified.items()))
         note = f"ε = {epsilon:.4g} m: max(floor {self.floor:g}"
+        if self.actuators != "ideal":
+            ideal = [
+                self.models[i].name
+                for i in used
+                if not self.models[i].certified_under(self.actuators)
+            ]
+            fallback = f"; ideal-tracking certificates for {', '.join(ideal)}" if ideal else ""
+            note = f"[{self.actuators} actuators{fallback}] {note}"
         note += f", certified δ at t_safe {self.t_safe:g} s: {deltas})" if deltas else ")"
         note += (
             f"; rows against a settled peer keep max({self.settled_floor:g}, their model's δ at"
@@ -69,7 +82,8 @@ class CertifiedMargins:
         key = (model_index, bound)
         if key not in self._cache:
             slow = self.certified and bound < 1.0
-            found = self.models[model_index].certified_margin(bound * self.t_safe) if slow else None
+            model = self.models[model_index]
+            found = model.certified_margin(bound * self.t_safe, self.actuators) if slow else None
             margin = (
                 self.epsilon if found is None else min(self.epsilon, max(self.settled_floor, found))
             )

@@ -120,24 +120,36 @@ class PairValueModel:
             base_range=None if base_range is None else (base_range[0], base_range[1]),
         )
 
-    def certified_level(self, tau: float) -> float | None:
-        """The largest level ``δ`` [m] certified at time-to-go ``tau`` [s] (None: none there).
+    def certified_level(self, tau: float, actuators: str = "ideal") -> float | None:
+        """The largest level ``δ`` [m] certified at time-to-go ``tau`` [s] for the actuator
+        model ``actuators`` (None: none there).
 
         A certificate that missed its target still counts with the level it reached last, so a
         planner never trusts the model below it.
         """
-        found = [c["delta"] for c in self.certificates if abs(c["tau"] - tau) < 1e-6]
+        found = [c["delta"] for c in self.certified_for(actuators) if abs(c["tau"] - tau) < 1e-6]
         return max(found) if found else None
 
-    def certified_margin(self, tau: float) -> float | None:
+    def certified_margin(self, tau: float, actuators: str = "ideal") -> float | None:
         """The level ``δ`` [m] certified at the shortest certified time-to-go ``τ_c ≥ tau`` [s]
         (the horizon itself when certified there), or None when none is that long.
 
         A level certified over a longer horizon is taken for a shorter one, on the premise that
         the learned value's error does not shrink with the horizon.
         """
-        longer = [float(c["tau"]) for c in self.certificates if c["tau"] >= tau - 1e-6]
-        return self.certified_level(min(longer)) if longer else None
+        longer = [float(c["tau"]) for c in self.certified_for(actuators) if c["tau"] >= tau - 1e-6]
+        return self.certified_level(min(longer), actuators) if longer else None
+
+    def certified_under(self, actuators: str) -> bool:
+        """Whether the card holds a certificate made under actuator model ``actuators`` (one
+        that names none was made with ideal tracking)."""
+        return any(_actuators(c) == actuators for c in self.certificates)
+
+    def certified_for(self, actuators: str) -> list[dict[str, Any]]:
+        """The certificates made under actuator model ``actuators``; the ideal ones if the card
+        has none for it."""
+        name = actuators if self.certified_under(actuators) else "ideal"
+        return [c for c in self.certificates if _actuators(c) == name]
 
     def evaluate(
         self, tau: float, x: np.ndarray, own_step: np.ndarray | None = None
@@ -190,3 +202,8 @@ class _BufferedCall:
         if self.buffer.ret() != 0:
             raise NehmoError(f"evaluation of {self.fn.name()} failed (status {self.buffer.ret()})")
         return self.v.copy(), self.g.copy()
+
+
+def _actuators(certificate: dict[str, Any]) -> str:
+    """The actuator model a card's certificate holds for (``ideal`` if it names none)."""
+    return str((certificate.get("actuators") or {}).get("name", "ideal"))

@@ -50,6 +50,7 @@ class PeerPairs:
             settings.hold.settled_epsilon,
             settings.opt.t_safe,
             settings.margins.certified,
+            settings.margins.actuators,
         )
         self.settings = settings.override({"opt.epsilon": self.margins.epsilon})
         self._last: tuple[object, PeerValues] | None = None  # see current()

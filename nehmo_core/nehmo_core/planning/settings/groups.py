@@ -73,6 +73,13 @@ class MarginSettings:
         "raise opt.epsilon to the pair models' certified error at t_safe "
         "(false: the paper's fixed margin)",
     )
+    # certificates say which actuator model their rollouts assumed (nehmo verify --actuators);
+    # a model without one for this model keeps its ideal-tracking certificates
+    actuators: str = setting(
+        "ideal",
+        "the actuator model whose certificates set the margins (nehmo verify --actuators)",
+        choices=("ideal", "realistic", "limits"),
+    )
 
     def __post_init__(self) -> None:
         check_group(self, "margins")

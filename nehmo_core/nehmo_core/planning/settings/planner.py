@@ -55,7 +55,11 @@ PRESETS: Mapping[str, Mapping[str, Any]] = types.MappingProxyType(
         "ipopt": {"solver.name": "ipopt"},
         "wrapped_goal": {"opt.wrap_goal": True},
         # for arms that follow commands under acceleration limits (docs/evaluation.md)
-        "real_actuators": {"actuator.enabled": True, "hold.self_check": True},
+        "real_actuators": {
+            "actuator.enabled": True,
+            "hold.self_check": True,
+            "margins.actuators": "realistic",
+        },
     }
 )
 
