@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -38,6 +40,7 @@ __all__ = [
     "ArmTracker",
     "actuator_model",
     "cell_actuators",
+    "certificate_actuators",
 ]
 
 ACTUATOR_MODELS = ("ideal", "realistic", "limits")
@@ -105,6 +108,12 @@ def actuator_model(name: str, robot: RobotModel) -> ActuatorModel:
     if name == "limits":
         return ActuatorModel("limits", tuple(accel))
     return ActuatorModel("realistic", tuple(accel), REALISTIC_LATENCY, REALISTIC_NOISE)
+
+
+def certificate_actuators(certificate: Mapping[str, Any]) -> str:
+    """The name of the actuator model a model card's certificate holds for (``nehmo verify
+    --actuators``; a certificate that names none was made with ideal tracking)."""
+    return str((certificate.get("actuators") or {}).get("name", "ideal"))
 
 
 def cell_actuators(cell: Cell, name: str) -> dict[str, ActuatorModel]:

@@ -15,6 +15,7 @@ from typing import Any
 
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.robots.registry import model_file
+from nehmo_core.sim.actuators import certificate_actuators
 from nehmo_core.verify.certify import Certificate
 
 SUMMARY_KEYS = (
@@ -48,11 +49,6 @@ def _summary(cert: Certificate) -> dict[str, Any]:
     return out
 
 
-def actuators_of(certificate: dict[str, Any]) -> str:
-    """The name of the actuator model a card's certificate holds for (``ideal`` if unstated)."""
-    return str((certificate.get("actuators") or {}).get("name", "ideal"))
-
-
 def record_certificate(card_path: Path, cert: Certificate) -> None:
     """Add ``cert`` to ``card.certificates``, replacing one of the same τ, distribution and
     actuator model."""
@@ -65,11 +61,12 @@ def record_certificate(card_path: Path, cert: Certificate) -> None:
         if not (
             abs(c["tau"] - cert.tau) < 1e-9
             and c["distribution"]["name"] == cert.distribution["name"]
-            and actuators_of(c) == actuators_of(entry)
+            and certificate_actuators(c) == certificate_actuators(entry)
         )
     ]
     card["certificates"] = sorted(
-        [*kept, entry], key=lambda c: (c["tau"], c["distribution"]["name"], actuators_of(c))
+        [*kept, entry],
+        key=lambda c: (c["tau"], c["distribution"]["name"], certificate_actuators(c)),
     )
     card_path.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
 
@@ -86,7 +83,7 @@ def certified_level(
     found = [
         c
         for c in card.get("certificates", [])
-        if abs(c["tau"] - tau) < 1e-6 and actuators_of(c) == actuators
+        if abs(c["tau"] - tau) < 1e-6 and certificate_actuators(c) == actuators
     ]
     if not found:
         return None

@@ -22,6 +22,7 @@ from nehmo_core.hjr.networks import ValueFunction
 from nehmo_core.planning.models.pair_frame import inverse_pose
 from nehmo_core.planning.numerics.codegen import compile_function
 from nehmo_core.robots.model import Pose
+from nehmo_core.sim.actuators import certificate_actuators
 
 __all__ = ["PairValueModel"]
 
@@ -143,13 +144,13 @@ class PairValueModel:
     def certified_under(self, actuators: str) -> bool:
         """Whether the card holds a certificate made under actuator model ``actuators`` (one
         that names none was made with ideal tracking)."""
-        return any(_actuators(c) == actuators for c in self.certificates)
+        return any(certificate_actuators(c) == actuators for c in self.certificates)
 
     def certified_for(self, actuators: str) -> list[dict[str, Any]]:
         """The certificates made under actuator model ``actuators``; the ideal ones if the card
         has none for it."""
         name = actuators if self.certified_under(actuators) else "ideal"
-        return [c for c in self.certificates if _actuators(c) == name]
+        return [c for c in self.certificates if certificate_actuators(c) == name]
 
     def evaluate(
         self, tau: float, x: np.ndarray, own_step: np.ndarray | None = None
@@ -202,8 +203,3 @@ class _BufferedCall:
         if self.buffer.ret() != 0:
             raise NehmoError(f"evaluation of {self.fn.name()} failed (status {self.buffer.ret()})")
         return self.v.copy(), self.g.copy()
-
-
-def _actuators(certificate: dict[str, Any]) -> str:
-    """The actuator model a card's certificate holds for (``ideal`` if it names none)."""
-    return str((certificate.get("actuators") or {}).get("name", "ideal"))
