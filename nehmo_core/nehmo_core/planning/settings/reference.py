@@ -44,6 +44,11 @@ def _value(v: object) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
+def _cell(text: str) -> str:
+    """``text`` fit for a Markdown table cell (a ``|`` would end the cell)."""
+    return text.replace("|", "\\|")
+
+
 def markdown() -> str:
     """The page's text."""
     out = [INTRO]
@@ -60,7 +65,7 @@ def markdown() -> str:
             rule = f.metadata["rule"]
             out.append(
                 f"| `{g.name}.{f.name}` | {_value(getattr(group, f.name))} | {rule.unit} "
-                f"| {rule.describe()} | {rule.doc} |\n"
+                f"| {_cell(rule.describe())} | {_cell(rule.doc)} |\n"
             )
     return "".join(out)
 
