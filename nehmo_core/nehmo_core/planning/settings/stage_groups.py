@@ -152,6 +152,19 @@ class ActuatorSettings:
         "1/s",
         ge=0,
     )
+    # the learned V read 2 cm above the real distance near contact and a UR5 at 0.5 rad/s
+    # closed 1.5 cm per tick while it braked (five UR5, realistic actuators, development
+    # seed 60, scenario 32)
+    brake_clearance: float = setting(
+        0.04,
+        "real distance the arm's braking path keeps to near peers (0: off)",
+        "m",
+        ge=0,
+        le=1,
+    )
+    brake_near: float = setting(
+        0.15, "only peers whose V now reads below this are checked", "m", gt=-1, le=1
+    )
 
     def __post_init__(self) -> None:
         check_group(self, "actuator")

@@ -22,6 +22,14 @@ margin. With ``approach_rate`` γ the stage adds one row per peer, linear in the
 ``∇_{q_own}V·y ≥ −γ·t_plan·max(V − margin, 0)``: V may fall at most γ times its gap per second,
 so the arm slows down as the gap closes (γ·(braking time) below one keeps the approach from
 overshooting). A step of zero keeps the rows.
+
+Near contact the learned V errs by centimetres, and an arm moving fast still travels
+``u·|u|/(2a)`` per joint while it brakes. With ``brake_clearance`` the filter checks, with the
+real geometry (the cell's shared PyBullet world), where the arm comes to rest if it sends the
+command for one tick and then brakes at its limits, against every peer whose V reads below
+``brake_near`` (posed where they are now). If that rest pose comes closer than
+``brake_clearance`` (or than now, where the arms are already closer), the arm brakes as hard as
+it can instead.
 """
 
 from __future__ import annotations
@@ -32,11 +40,12 @@ from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.problem import LinearRows
 from nehmo_core.planning.opt.tick import PeerValues, Tick
+from nehmo_core.planning.stages.exact_guard import WorldFilter, closest
 
 __all__ = ["AccelLimits"]
 
 
-class AccelLimits:
+class AccelLimits(WorldFilter):
     """The ``actuator`` row provider and command filter of one planner."""
 
     name = "actuator"
@@ -47,22 +56,21 @@ class AccelLimits:
         if limits is None:
             rule = f"needs facts.accel_limits in the description of robot {host.robot.name!r}"
             raise InvalidValueError("actuator.enabled", rule, True)
-        self.host = host
+        super().__init__(host, world=s.actuator.brake_clearance > 0.0)
         self.dof = host.robot.dof
         self.rate = s.actuator.approach_rate
         self.t_plan = s.opt.t_plan
         # [rad/s] the change of command one tick reaches, per joint
-        self.reach = s.actuator.share * s.opt.tick * np.asarray(limits, dtype=float)
-        self.shortened = 0
+        self.accel = s.actuator.share * np.asarray(limits, dtype=float)
+        self.reach = s.opt.tick * self.accel
+        self.braked = 0
         self.reset()
 
     def reset(self) -> None:
         """At rest: the last command is zero."""
         self.last = np.zeros(self.dof)
         self.shortened = 0
-
-    def close(self) -> None:
-        """It holds nothing."""
+        self.braked = 0
 
     def rows(self, q: np.ndarray) -> LinearRows:
         """``y_j ≥ t_plan·(last_j − reach_j)`` and ``−y_j ≥ −t_plan·(last_j + reach_j)``."""
@@ -85,5 +93,31 @@ class AccelLimits:
         """``u`` clipped to the commands reachable from the last one; remembered as the last."""
         out = np.clip(u, self.last - self.reach, self.last + self.reach)
         self.shortened += not np.array_equal(out, u)
+        out = self._brake(tick, now, out)
         self.last = np.array(out, dtype=float)
         return out
+
+    def _rest(self, q: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Where the arm stops if it sends ``u`` for a tick and then brakes at its limits."""
+        return q + u * self.host.settings.opt.tick + u * np.abs(u) / (2.0 * self.accel)
+
+    def _brake(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
+        """``u`` if its rest pose keeps the braking clearance from near peers (or, already
+        closer, comes no closer); else the hardest braking the band allows."""
+        s = self.host.settings.actuator
+        if self._lease is None:
+            return u
+        near = {
+            p: tick.peers[p] for p, v in zip(now.ids, now.values, strict=True) if v < s.brake_near
+        }
+        if not near:
+            return u
+        world, arm, q = self._lease.world, self.host.arm_id, tick.q
+        world.set_configuration(near)
+        cutoff = s.brake_clearance + 0.05
+        floor = min(closest(world, arm, q, near, cutoff), s.brake_clearance)
+        if closest(world, arm, self._rest(q, u), near, cutoff) >= floor:
+            return u
+        self.braked += 1
+        low, high = self.last - self.reach, self.last + self.reach
+        return np.clip(np.zeros_like(u), low, high)

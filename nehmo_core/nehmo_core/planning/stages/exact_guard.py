@@ -90,11 +90,11 @@ def closer_than(
 class WorldFilter:
     """A command filter that checks the real geometry in the cell's shared PyBullet world."""
 
-    def __init__(self, host: Host) -> None:
+    def __init__(self, host: Host, world: bool = True) -> None:
         self.host = host
         self.shortened = 0
         # built now, not in the first tick; no constrained peer, nothing to guard against
-        self._lease = cell_world(host.cell, self) if host.pairs else None
+        self._lease = cell_world(host.cell, self) if world and host.pairs else None
 
     def close(self) -> None:
         """Give the cell's world back (it closes with its last user)."""
