@@ -55,6 +55,33 @@ def test_a_command_whose_rest_pose_reaches_a_near_peer_is_braked() -> None:
     np.testing.assert_allclose(off_stage.filter(tick, now, toward), toward)  # type: ignore[attr-defined]
 
 
+def test_a_fail_safe_with_no_peer_near_brakes_instead() -> None:
+    """Opt infeasible on its linear rows with the peer far (V ≥ brake_near): the fail-safe's
+    full-speed step up V's gradient is replaced by the hardest braking; with the peer near, the
+    fail-safe stands (within the band)."""
+    registry = ModelRegistry()
+    settings = PlannerSettings().override({"actuator.enabled": True, "opt.deadline": 3600.0})
+    planner = NehmoPlanner(DUAL, A, registry.models_for("nehmo", DUAL), settings)
+    stage = planner.stage("actuator")
+    peer = np.array([0.52 + np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
+    moving = np.full(6, 0.5)
+    for q, far in (
+        (np.array([-1.5, -1.2, 1.0, 0.0, 0.0, 0.0]), True),
+        (np.array([0.44, -1.2, 1.0, 0.0, 0.0, 0.0]), False),
+    ):
+        now = planner.current(q, {B: peer}, {B: 1.0})
+        assert (float(now.values.min()) >= settings.actuator.brake_near) == far
+        tick = read_tick(planner, q, {B: peer}, q, {B: 1.0}, None)
+        tick.fail_safe = True
+        stage.last = moving.copy()  # type: ignore[attr-defined]
+        out = stage.filter(tick, now, -moving)  # type: ignore[attr-defined]
+        np.testing.assert_allclose(out, moving - 0.2)  # at speed, either way: the band's edge
+        stage.last = np.zeros(6)  # type: ignore[attr-defined]
+        out = stage.filter(tick, now, np.full(6, 0.5))  # type: ignore[attr-defined]
+        # at rest: far, it stays still; near, the fail-safe starts as fast as the band allows
+        np.testing.assert_allclose(out, np.zeros(6) if far else np.full(6, 0.2))
+
+
 # five UR5, development seed 60, scenario 32 (full precision: the closed loop is chaotic): a
 # holding arm in its fail-safe and a peer closing at 0.5 rad/s, whose learned V reads 2 cm above
 # the real distance, touch at 6.36 s under realistic tracking unless the peer brakes in time

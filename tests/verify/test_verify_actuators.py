@@ -97,7 +97,8 @@ def test_certificates_record_their_actuator_model_and_planners_pick_theirs(
     found = certified_level(meta["card"], TAU, "limits")
     assert found is not None and found[0] == pytest.approx(limited.delta)
     model = replace(_any_model(), certificates=tuple(meta["card"]["certificates"]))
-    assert model.certified_level(TAU, "limits") == pytest.approx(limited.delta)
+    # under an actuator model the ideal levels at the same τ count too
+    assert model.certified_level(TAU, "limits") == pytest.approx(max(limited.delta, ideal.delta))
     assert model.certified_level(TAU) == pytest.approx(ideal.delta)
     # no certificate for that model: the ideal ones count (and the planner says so)
     assert model.certified_level(TAU, "realistic") == pytest.approx(ideal.delta)
@@ -130,3 +131,9 @@ def test_a_planner_takes_its_margin_from_its_actuator_models_certificates() -> N
     assert (ideal.epsilon, real.epsilon, limits.epsilon) == (0.07, 0.11, 0.07)
     assert real.source.startswith("[realistic actuators]")
     assert "ideal-tracking certificates for" in limits.source
+    # a distribution certified only with ideal tracking keeps its level under realistic
+    visited = {"tau": TAU, "delta": 0.13, "distribution": {"name": "visited"}}
+    both = CertifiedMargins(
+        [replace(base, certificates=(*certs, visited))], [0], 0.05, 0.01, TAU, actuators="realistic"
+    )
+    assert both.epsilon == 0.13

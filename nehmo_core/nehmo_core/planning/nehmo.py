@@ -259,6 +259,7 @@ class NehmoPlanner:
             u = self.fail_safe_command(now, tick.rows, tick.cap)
             self._warm = None
             min_constraint, fail_safe = math.nan, True
+        tick.fail_safe = fail_safe
         for command_filter in self._filters:
             u = command_filter.filter(tick, now, u)
         for objective in self._objectives:

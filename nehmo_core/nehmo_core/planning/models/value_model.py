@@ -126,9 +126,12 @@ class PairValueModel:
         model ``actuators`` (None: none there).
 
         A certificate that missed its target still counts with the level it reached last, so a
-        planner never trusts the model below it.
+        planner never trusts the model below it. Under an actuator model the ideal-tracking
+        levels at ``tau`` count too: an arm that tracks worse needs no less (a distribution
+        certified only with ideal tracking keeps its level).
         """
-        found = [c["delta"] for c in self.certified_for(actuators) if abs(c["tau"] - tau) < 1e-6]
+        pool = [*self.certified_for(actuators), *self.certified_for("ideal")]
+        found = [c["delta"] for c in pool if abs(c["tau"] - tau) < 1e-6]
         return max(found) if found else None
 
     def certified_margin(self, tau: float, actuators: str = "ideal") -> float | None:

@@ -51,8 +51,9 @@ class Tick:
     ``bounds``: each constrained peer's speed bound (a fraction of d̄; 1 unless announced);
     ``participants``: the peers that take part in the announcements. The stages set ``cap``
     (the share of ū the command keeps), ``announced`` (this command's announcement),
-    ``rows`` (linear rows on the step besides the V rows) and ``steered_by`` (the objective
-    stage whose target replaced the goal this tick).
+    ``rows`` (linear rows on the step besides the V rows), ``steered_by`` (the objective
+    stage whose target replaced the goal this tick) and ``fail_safe`` (the planner ran the
+    fail-safe).
     """
 
     q: np.ndarray
@@ -65,3 +66,4 @@ class Tick:
     announced: float = FULL_SPEED
     rows: LinearRows | None = None
     steered_by: str | None = None
+    fail_safe: bool = False  # Opt gave no step this tick: the fail-safe command ran

@@ -30,6 +30,12 @@ command for one tick and then brakes at its limits, against every peer whose V r
 ``brake_near`` (posed where they are now). If that rest pose comes closer than
 ``brake_clearance`` (or than now, where the arms are already closer), the arm brakes as hard as
 it can instead.
+
+The band can also make Opt infeasible with no peer near: an arm moving fast beside its own links
+cannot turn as fast as the self-clearance rows ask. The paper's fail-safe would then drive it at
+full speed up the gradient of a peer's V that is nowhere near its margin, into the same conflict
+a few ticks later (an arm looped so for 20 s, dual UR5, seed 67, scenario 65). When the fail-safe
+runs and every peer's V reads at least ``brake_near``, the arm brakes as hard as it can instead.
 """
 
 from __future__ import annotations
@@ -91,7 +97,20 @@ class AccelLimits(WorldFilter):
 
     def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
         """``u`` clipped to the commands reachable from the last one; remembered as the last."""
-        out = np.clip(u, self.last - self.reach, self.last + self.reach)
+        low, high = self.last - self.reach, self.last + self.reach
+        if (
+            tick.fail_safe
+            and now.ids
+            and float(now.values.min()) >= self.host.settings.actuator.brake_near
+        ):
+            # Opt failed on the linear rows (this band against the self-clearance rows), not
+            # on a peer: the fail-safe's full-speed step away from a far peer would only drive
+            # the arm on; it brakes instead
+            self.braked += 1
+            out = np.clip(np.zeros_like(u), low, high)
+            self.last = out
+            return out
+        out = np.clip(u, low, high)
         self.shortened += not np.array_equal(out, u)
         out = self._brake(tick, now, out)
         self.last = np.array(out, dtype=float)
