@@ -136,8 +136,9 @@ class ActuatorSettings:
     """Commands within the joint acceleration limits (``planning/stages/accel_limits.py``).
 
     Each command differs from the last by at most ``share`` of what each joint's acceleration
-    limit (the robot description's ``facts.accel_limits``) reaches in one ``opt.tick``, and V
-    against each peer falls no faster than ``approach_rate`` times its gap above the margin.
+    limit (the robot description's ``facts.accel_limits``) reaches in one ``opt.tick``, V
+    against each peer falls no faster than ``approach_rate`` times its gap above the margin, and
+    the arm brakes when its rest pose would come within ``brake_clearance`` of a near peer.
     """
 
     enabled: bool = setting(
@@ -163,7 +164,12 @@ class ActuatorSettings:
         le=1,
     )
     brake_near: float = setting(
-        0.15, "only peers whose V now reads below this are checked", "m", gt=-1, le=1
+        0.15,
+        "peers whose V now reads below this are near: checked for braking; none near, a "
+        "fail-safe brakes",
+        "m",
+        gt=-1,
+        le=1,
     )
 
     def __post_init__(self) -> None:
