@@ -116,6 +116,21 @@ def test_evaluate_tasks_writes_rows_per_arm_count(tmp_path: Path) -> None:
     assert "Ha et al." in (out / "summary.md").read_text()
 
 
+def test_tasks_run_under_an_actuator_model(tmp_path: Path) -> None:
+    """``--actuators realistic`` reaches the task runner's simulator (it once failed every task:
+    the simulator was built ideal), and the episodes record the model."""
+    tasks = tmp_path / "tasks"
+    tasks.mkdir()
+    shutil.copy(TASKS / "135011.json", tasks / "135011.json")  # 2 arms
+    out = tmp_path / "out"
+    args = ["--tasks", str(tasks), "--planners", "nehmo", "--out", str(out), "--no-progress"]
+    assert evaluate_main([*args, "--actuators", "realistic"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["episode_settings"]["actuators"] == "realistic"
+    row = summary["rows"][0]
+    assert row["ours"]["episodes"] == 1 and not any(e["error"] for e in row["episodes"])
+
+
 def test_a_task_with_a_pair_no_model_covers_is_skipped_with_its_reason(tmp_path: Path) -> None:
     """Two UR5s 1 m apart, one mounted 0.3 m higher, are within reach of each other, and no
     shipped model covers bases at different heights: the task is skipped by every row with that

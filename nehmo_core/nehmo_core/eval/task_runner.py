@@ -134,7 +134,7 @@ def _episode(config: TaskConfig, row: str, task: HaTask) -> tuple[EpisodeResult,
     }
     log_path = _log_path(config, row, task)
     remove_bag(log_path)
-    with CellSimulator(cell, settings.substeps, settings.self_collision) as sim:
+    with CellSimulator(cell, settings.substeps, settings.self_collision, settings.actuators) as sim:
         result = run_episode(
             cell,
             task.scenario,
