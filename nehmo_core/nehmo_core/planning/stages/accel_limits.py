@@ -107,9 +107,8 @@ class AccelLimits(WorldFilter):
             # on a peer: the fail-safe's full-speed step away from a far peer would only drive
             # the arm on; it brakes instead
             self.braked += 1
-            out = np.clip(np.zeros_like(u), low, high)
-            self.last = out
-            return out
+            self.last = self._hardest_braking()
+            return self.last
         out = np.clip(u, low, high)
         self.shortened += not np.array_equal(out, u)
         out = self._brake(tick, now, out)
@@ -134,9 +133,13 @@ class AccelLimits(WorldFilter):
         world, arm, q = self._lease.world, self.host.arm_id, tick.q
         world.set_configuration(near)
         cutoff = s.brake_clearance + 0.05
-        floor = min(closest(world, arm, q, near, cutoff), s.brake_clearance)
-        if closest(world, arm, self._rest(q, u), near, cutoff) >= floor:
+        rest = closest(world, arm, self._rest(q, u), near, cutoff)
+        # the distance now matters only where the rest pose is inside the clearance
+        if rest >= s.brake_clearance or rest >= closest(world, arm, q, near, cutoff):
             return u
         self.braked += 1
-        low, high = self.last - self.reach, self.last + self.reach
-        return np.clip(np.zeros_like(u), low, high)
+        return self._hardest_braking()
+
+    def _hardest_braking(self) -> np.ndarray:
+        """The command in the band nearest to standing still."""
+        return np.clip(np.zeros(self.dof), self.last - self.reach, self.last + self.reach)
