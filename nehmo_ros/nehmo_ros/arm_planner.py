@@ -69,7 +69,7 @@ from nehmo_core.logs.topics import (
     status_topic,
 )
 from nehmo_core.planning.settings import REMOVED, RENAMED, PlannerSettings
-from nehmo_ros.control import ArmController, ControlSettings
+from nehmo_ros.control import ArmController, ControlSettings, Decision
 from nehmo_ros.fault_injection import FaultInjectingPlanner, parse_fault
 from nehmo_ros.markers import MarkerPublisher
 from nehmo_ros.move_action import GoalKeeper
@@ -185,6 +185,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
         self.configured = False
         self.timer: Any = None  # the command timer while active
         self._last_publish: float | None = None
+        self._sent: tuple[float, int] | None = None  # (period [s], publish_wall_ns) of this tick
         if autostart:
             self._configure()  # errors stop the node with one line
             self.trigger_configure()
@@ -354,30 +355,39 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
             self.published["commands"] += 1
 
     def _tick(self) -> None:
-        now = time.monotonic()
         stamp_ns = self.get_clock().now().nanoseconds
         self._read_states()
-        decision = self.controller.tick(now, stamp_ns)
+        self._sent = None
+        decision = self.controller.tick(time.monotonic(), stamp_ns, send=self._send)
         self.goals.on_tick(decision)
         self.markers.on_tick(decision)
+        if self._sent is None:
+            return
+        period, wall_ns = self._sent
+        if self.controller.announces:  # a planner that announces nothing stays silent
+            self.bound_pub.publish(Float64(data=self.controller.announcement))
+        status = self._status(decision, period, wall_ns)
+        self.status_pub.publish(log_msgs.serialize(status))
+        self.published["statuses"] += 1
+        self._publish_diagnostics(status, stamp_ns)
+        self._report(decision)
+
+    def _send(self, decision: Decision) -> None:
+        """Publish the tick's command first, before the solve starts and before any report; its
+        publish instant (``publish_wall_ns``) and the period since the last are kept in
+        ``_sent`` for the status."""
         if not self._ready:
             if not decision.ready:  # nothing to command yet: the bridge's watchdog holds the arm
                 self.get_logger().info(f"waiting ({decision.status})", throttle_duration_sec=2.0)
                 return
             self._ready = True
             self.get_logger().info("planning")
-        command = Float64MultiArray(data=[float(u) for u in decision.velocity])
-        self.command_pub.publish(command)
+        self.command_pub.publish(Float64MultiArray(data=[float(u) for u in decision.velocity]))
+        wall_ns, now = time.time_ns(), time.monotonic()
         self.published["commands"] += 1
-        if self.controller.announces:  # a planner that announces nothing stays silent
-            self.bound_pub.publish(Float64(data=self.controller.announcement))
         period = math.nan if self._last_publish is None else now - self._last_publish
         self._last_publish = now
-        status = self._status(decision, period, time.time_ns())
-        self.status_pub.publish(log_msgs.serialize(status))
-        self.published["statuses"] += 1
-        self._publish_diagnostics(status, stamp_ns)
-        self._report(decision)
+        self._sent = (period, wall_ns)
 
     def on_stop(self) -> None:
         """Active: command a stop once (if the middleware is still up); end the worker thread."""

@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -242,17 +242,23 @@ class ArmController:
         )
 
     # -- the tick (timer thread) ------------------------------------------------------------
-    def tick(self, now: float, stamp_ns: int = 0) -> Decision:
+    def tick(
+        self, now: float, stamp_ns: int = 0, send: Callable[[Decision], None] | None = None
+    ) -> Decision:
         """The command to publish now; starts the solve of this tick's observations.
 
         ``now`` [s] is monotonic time (staleness), ``stamp_ns`` the ROS time of the tick.
+        ``send`` gets the decision before that solve starts, so the command goes out without
+        sharing the interpreter with the solve thread.
         """
         obs = self.observe(now, stamp_ns)
         if self._paused or self._resuming:
-            return self._held_tick(obs)
+            return self._held_tick(obs, send)
         decision = self._collect(obs)
         self._count(decision)
         self.last_observation = obs
+        if send is not None:
+            send(decision)
         if self._worker.submit(obs):
             self._submitted = obs
         self._tick += 1
@@ -272,7 +278,9 @@ class ArmController:
     def paused(self) -> bool:
         return self._paused
 
-    def _held_tick(self, obs: Observation) -> Decision:
+    def _held_tick(
+        self, obs: Observation, send: Callable[[Decision], None] | None = None
+    ) -> Decision:
         """A tick while paused or resuming: zero, every plan made before the pause dropped."""
         self._worker.take()  # a result planned before the pause is never commanded
         self._submitted = None
@@ -282,6 +290,8 @@ class ArmController:
         )
         self._count(decision)
         self.last_observation = obs
+        if send is not None:
+            send(decision)
         if self._resuming and self._worker.submit(obs):  # busy with an old solve: next tick
             self._submitted, self._resuming = obs, False
         self._tick += 1

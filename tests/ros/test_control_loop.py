@@ -21,7 +21,7 @@ from _control_helpers import (
 )
 
 from nehmo_core.planning.opt.interface import PlanResult, Telemetry
-from nehmo_ros.control import ArmController
+from nehmo_ros.control import ArmController, Decision
 
 
 def test_command_of_tick_k_comes_from_the_observation_of_tick_k_minus_1() -> None:
@@ -39,6 +39,35 @@ def test_command_of_tick_k_comes_from_the_observation_of_tick_k_minus_1() -> Non
             assert commands[k].tick == k - 1
             assert commands[k].observation_ns == (k - 1) * 40_000_000
             assert commands[k].velocity[0] == pytest.approx((k - 1) * 0.01)
+    finally:
+        c.stop()
+
+
+def test_the_command_is_sent_before_the_solve_of_its_tick_starts() -> None:
+    """``send`` gets each tick's decision while no solve runs: the node publishes its command
+    without sharing the interpreter with the solve thread. (The planner blocks until the test
+    releases it, so a solve started before ``send`` would still be running there.)"""
+    planner = RecordingPlanner(delay=0.001)
+    c = _controller(planner)
+    try:
+        seen: list[tuple[int, bool, int]] = []  # (command's tick, worker busy, plan() calls)
+
+        def send(decision: Decision) -> None:
+            seen.append((decision.tick, c._worker.busy, len(planner.calls)))
+
+        for k in range(4):
+            _feed(c, k * 0.04, q0=float(k))
+            decision = c.tick(k * 0.04, stamp_ns=k * 40_000_000, send=send)
+            assert seen[-1][0] == decision.tick
+            _in_plan(planner)  # the tick's solve did start, after send
+            planner.entered.clear()
+            planner.release.set()
+            _wait_idle(c)
+            planner.release.clear()
+        assert [(busy, calls) for _, busy, calls in seen] == [(False, k) for k in range(4)]
+        c.pause()
+        held = c.tick(0.16, send=send)
+        assert held.status == "paused" and seen[-1][0] == held.tick
     finally:
         c.stop()
 
