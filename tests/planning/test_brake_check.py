@@ -55,13 +55,17 @@ def test_a_command_whose_rest_pose_reaches_a_near_peer_is_braked() -> None:
     np.testing.assert_allclose(off_stage.filter(tick, now, toward), toward)  # type: ignore[attr-defined]
 
 
-def test_a_fail_safe_with_no_peer_near_brakes_instead() -> None:
-    """Opt infeasible on its linear rows with the peer far (V ≥ brake_near): the fail-safe's
-    full-speed step up V's gradient is replaced by the hardest braking; with the peer near, the
-    fail-safe stands (within the band)."""
+def test_a_fail_safe_with_no_peer_near_brakes_instead_with_far_brake() -> None:
+    """With ``far_brake``, Opt infeasible on its linear rows with the peer far (V ≥ brake_near):
+    the fail-safe's full-speed step up V's gradient is replaced by the hardest braking; with the
+    peer near, the fail-safe stands (within the band). Without it (the default) the fail-safe
+    stands either way."""
     registry = ModelRegistry()
-    settings = PlannerSettings().override({"actuator.enabled": True, "opt.deadline": 3600.0})
-    planner = NehmoPlanner(DUAL, A, registry.models_for("nehmo", DUAL), settings)
+    base = {"actuator.enabled": True, "opt.deadline": 3600.0}
+    models = registry.models_for("nehmo", DUAL)
+    default = NehmoPlanner(DUAL, A, models, PlannerSettings().override(base)).stage("actuator")
+    settings = PlannerSettings().override({**base, "actuator.far_brake": True})
+    planner = NehmoPlanner(DUAL, A, models, settings)
     stage = planner.stage("actuator")
     peer = np.array([0.52 + np.pi, -1.2, 1.0, 0.0, 0.0, 0.0])
     moving = np.full(6, 0.5)
@@ -80,6 +84,9 @@ def test_a_fail_safe_with_no_peer_near_brakes_instead() -> None:
         out = stage.filter(tick, now, np.full(6, 0.5))  # type: ignore[attr-defined]
         # at rest: far, it stays still; near, the fail-safe starts as fast as the band allows
         np.testing.assert_allclose(out, np.zeros(6) if far else np.full(6, 0.2))
+        default.last = np.zeros(6)  # type: ignore[attr-defined]
+        out = default.filter(tick, now, np.full(6, 0.5))  # type: ignore[attr-defined]
+        np.testing.assert_allclose(out, np.full(6, 0.2))  # the fail-safe, within the band
 
 
 # five UR5, development seed 60, scenario 32 (full precision: the closed loop is chaotic): a
