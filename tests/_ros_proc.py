@@ -15,6 +15,7 @@ Modes
 """
 
 import json
+import signal
 import sys
 import time
 
@@ -68,10 +69,15 @@ def run_listen(seconds: float, out_path: str, topics: list[str]) -> int:
 def run_flood(seconds: float, arm: str) -> int:
     import rclpy
     from rclpy.node import Node
+    from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    rclpy.init()
+    # its own SIGTERM handler: the loop ends and the counts are printed whatever rclpy is doing
+    stop: list[int] = []
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda n, _frame: stop.append(n))
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Node("foreign_flood")
     states = node.create_publisher(JointState, f"/{arm}/joint_states", 100)
     commands = node.create_publisher(Float64MultiArray, f"/{arm}/velocity_controller/commands", 10)
@@ -95,7 +101,7 @@ def run_flood(seconds: float, arm: str) -> int:
     print(json.dumps({"flooding": arm}), flush=True)
     end = time.monotonic() + seconds
     k = 0
-    while time.monotonic() < end and rclpy.ok():
+    while time.monotonic() < end and rclpy.ok() and not stop:
         names, position = bad_states[k % len(bad_states)]
         states.publish(JointState(name=names, position=position))
         sent["states"] += 1

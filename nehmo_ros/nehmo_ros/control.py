@@ -247,9 +247,8 @@ class ArmController:
     ) -> Decision:
         """The command to publish now; starts the solve of this tick's observations.
 
-        ``now`` [s] is monotonic time (staleness), ``stamp_ns`` the ROS time of the tick.
-        ``send`` gets the decision before that solve starts, so the command goes out without
-        sharing the interpreter with the solve thread.
+        ``now`` [s] is monotonic time (staleness), ``stamp_ns`` the ROS time of the tick. ``send``
+        gets the decision before that solve starts (the command need not share the interpreter).
         """
         obs = self.observe(now, stamp_ns)
         if self._paused or self._resuming:
