@@ -158,17 +158,22 @@ def markdown(result: dict[str, Any]) -> str:
         " misses | fail-safes |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for arm, stats in result.items():
-        if not isinstance(stats, dict) or "at_planner" not in stats:
-            continue
+    per_arm = {a: s for a, s in result.items() if isinstance(s, dict) and "at_planner" in s}
+    return "\n".join(lines + period_rows(per_arm)) + "\n"
+
+
+def period_rows(per_arm: dict[str, Any]) -> list[str]:
+    """Markdown table rows of :func:`analyse`'s per-arm statistics (planner, then recorder)."""
+    rows = []
+    for arm, stats in per_arm.items():
         for where in ("at_planner", "at_recorder"):
             s = stats[where]
-            lines.append(
+            rows.append(
                 f"| {arm} | {where} | {s.get('count', 0)} | {s.get('within_40pm5_pct', 0):.2f} %"
                 f" | {s.get('p0.1_p1_p50_p99_p99.9_ms')} | {s.get('max_ms')} |"
                 f" {stats['deadline_misses']} | {stats['fail_safes']} |"
             )
-    return "\n".join(lines) + "\n"
+    return rows
 
 
 def main() -> int:

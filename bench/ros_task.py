@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from _report import machine_at_end, write_report
-from ros_rate import analyse
+from ros_rate import analyse, period_rows
 
 from nehmo_core.logs import iter_log
 
@@ -68,15 +68,7 @@ def markdown(result: dict[str, Any]) -> str:
         " misses | fail-safes |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for arm, stats in result["per_arm"].items():
-        for where in ("at_planner", "at_recorder"):
-            s = stats[where]
-            lines.append(
-                f"| {arm} | {where} | {s.get('count', 0)} | {s.get('within_40pm5_pct', 0):.2f} %"
-                f" | {s.get('p0.1_p1_p50_p99_p99.9_ms')} | {s.get('max_ms')} |"
-                f" {stats['deadline_misses']} | {stats['fail_safes']} |"
-            )
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + period_rows(result["per_arm"])) + "\n"
 
 
 def main() -> int:
