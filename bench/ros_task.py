@@ -24,17 +24,9 @@ from typing import Any
 from _report import machine_at_end, write_report
 from ros_rate import analyse, period_rows
 
-from nehmo_core.logs import iter_log
+from nehmo_core.eval.ha_tasks import load_task
 
 RESULTS = Path(__file__).resolve().parent / "results"
-
-
-def arms_in(bag: Path) -> list[str]:
-    """The arms whose planners published statuses in ``bag``."""
-    arms = {
-        rec.topic.split("/")[1] for rec in iter_log(bag) if rec.topic.endswith("/planner/status")
-    }
-    return sorted(arms)
 
 
 def run(task: Path, out: Path) -> dict[str, Any]:
@@ -43,7 +35,7 @@ def run(task: Path, out: Path) -> dict[str, Any]:
     summary = json.loads((out / "summary.json").read_text())
     episode = summary["episodes"][0]
     bag = Path(episode["log"])
-    arms = arms_in(bag)
+    arms = list(load_task(task).cell.arm_ids)
     return {
         "task": task.name,
         "arms": len(arms),

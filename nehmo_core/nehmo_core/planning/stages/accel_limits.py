@@ -83,7 +83,7 @@ class AccelLimits(WorldFilter):
     def rows(self, q: np.ndarray) -> LinearRows:
         """``y_j ≥ t_plan·(last_j − reach_j)`` and ``−y_j ≥ −t_plan·(last_j + reach_j)``."""
         eye = np.eye(self.dof)
-        low, high = self.last - self.reach, self.last + self.reach
+        low, high = self._band()
         return LinearRows(np.vstack([eye, -eye]), np.concatenate([low, -high]) * self.t_plan)
 
     def peer_rows(self, tick: Tick, now: PeerValues) -> LinearRows | None:
@@ -99,7 +99,6 @@ class AccelLimits(WorldFilter):
 
     def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
         """``u`` clipped to the commands reachable from the last one; remembered as the last."""
-        low, high = self.last - self.reach, self.last + self.reach
         if (
             tick.fail_safe
             and self.host.settings.actuator.far_brake
@@ -112,7 +111,7 @@ class AccelLimits(WorldFilter):
             self.braked += 1
             self.last = self._hardest_braking()
             return self.last
-        out = np.clip(u, low, high)
+        out = np.clip(u, *self._band())
         self.shortened += not np.array_equal(out, u)
         out = self._brake(tick, now, out)
         self.last = np.array(out, dtype=float)
@@ -143,6 +142,10 @@ class AccelLimits(WorldFilter):
         self.braked += 1
         return self._hardest_braking()
 
+    def _band(self) -> tuple[np.ndarray, np.ndarray]:
+        """The lowest and highest command [rad/s] each joint reaches from the last in a tick."""
+        return self.last - self.reach, self.last + self.reach
+
     def _hardest_braking(self) -> np.ndarray:
         """The command in the band nearest to standing still."""
-        return np.clip(np.zeros(self.dof), self.last - self.reach, self.last + self.reach)
+        return np.clip(np.zeros(self.dof), *self._band())
