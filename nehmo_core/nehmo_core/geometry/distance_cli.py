@@ -30,7 +30,12 @@ from nehmo_core.robots.registry import pair_base_range
 
 ALL_PAIRS = sorted([*PAIRS, *CONDITIONED_PAIRS])
 _GENERATE_OPTIONS = {"n_uniform": "--uniform", "n_boundary": "--boundary"}
-_TRAIN_OPTIONS = {"epochs": "--epochs", "seed": "--seed", "hidden": "--hidden"}
+_TRAIN_OPTIONS = {
+    "epochs": "--epochs",
+    "seed": "--seed",
+    "hidden": "--hidden",
+    "keypoints": "--keypoints",
+}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,6 +65,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     t.add_argument("--test", type=Path, help="held-out .npz (fresh seed) to report accuracy on")
     t.add_argument("--hidden", type=str, default="128,128,128", help="hidden widths, e.g. 128,128")
     t.add_argument("--epochs", type=int, default=DistanceTrainSettings.epochs)
+    t.add_argument(
+        "--keypoints",
+        default=DistanceTrainSettings.keypoints,
+        help="where the model's keypoints come from: 'links' (the robot description's link "
+        "origins and points) or 'geometry' (points in the bulk of each link's collision "
+        "geometry, stored in the model card)",
+    )
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--out", type=Path, help="output .safetensors (default: the shipped model)")
     c = sub.add_parser(
@@ -70,6 +82,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     c.add_argument("--data", type=Path, required=True, help="calibration .npz (not test data)")
     c.add_argument("--test", type=Path, help="held-out .npz to re-report accuracy on")
     c.add_argument("--target", type=float, default=0.015, help="false-safe rate to reach")
+    c.add_argument(
+        "--unbiased",
+        action="store_true",
+        help="no offset: the model keeps its fit (the offset from training removed); its "
+        "conservative level is then what 'nehmo pair build' certifies on contact states",
+    )
     c.add_argument("--model", type=Path, help="model .safetensors (default: the shipped model)")
     e = sub.add_parser("evaluate", help="accuracy of a distance model on a labelled .npz")
     e.add_argument("--pair", choices=ALL_PAIRS, required=True)
@@ -126,19 +144,26 @@ def load_dataset(path: Path) -> tuple[np.ndarray, np.ndarray, dict[str, object]]
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    """Offset = max(current, the one the calibration set needs); the card records both."""
+    """Offset = max(current, the one the calibration set needs), or 0 with ``--unbiased``; the
+    card records the offset before, the one the calibration set needed and the choice."""
     path = args.model or distance_model_path(args.pair)
     model = load_distance_file(path, args.pair)
     card = json.loads(path.with_suffix(".json").read_text())
     before = float(model.output_offset)
     q, d, meta = load_dataset(args.data)
     needed = calibrate_offset(model, q, d, args.target)  # sets the offset it found
-    offset = max(before, needed)
+    offset = 0.0 if args.unbiased else max(before, needed)
     with torch.no_grad():
         model.output_offset.fill_(offset)
     card["training"]["output_offset_m"] = offset
     card.setdefault("calibrations", []).append(
-        {"data": meta, "target_false_safe": args.target, "needed_m": needed, "before_m": before}
+        {
+            "data": meta,
+            "target_false_safe": args.target,
+            "needed_m": needed,
+            "before_m": before,
+            "unbiased": bool(args.unbiased),
+        }
     )
     if args.test is not None:
         qt, dt, meta_t = load_dataset(args.test)
@@ -181,7 +206,9 @@ def _train(args: argparse.Namespace) -> int:
             "--hidden", "must be comma-separated integers", args.hidden
         ) from None
     with as_options(_TRAIN_OPTIONS):
-        settings = DistanceTrainSettings(hidden=hidden, epochs=args.epochs, seed=args.seed)
+        settings = DistanceTrainSettings(
+            hidden=hidden, epochs=args.epochs, seed=args.seed, keypoints=args.keypoints
+        )
     q, d, meta = _training_data(args.pair, args.data)
     model, summary = train(args.pair, q, d, settings)
     card: dict[str, object] = {

@@ -54,6 +54,11 @@ class DistanceModelConfig:
     hidden: tuple[int, ...] = (128, 128, 128)
     softmin_betas: tuple[float, ...] = (20.0, 60.0)
     base2_range: tuple[float, float] | None = None  # conditioned: r [m] added to base2's x
+    # Each arm's keypoints ``(link, x, y, z)`` in link frames [m], when the model has its own
+    # (:func:`~nehmo_core.geometry.collision_points.collision_points`); None: the robot
+    # description's keypoints (link origins, segments and points).
+    points1: tuple[tuple[str, float, float, float], ...] | None = None
+    points2: tuple[tuple[str, float, float, float], ...] | None = None
 
     @property
     def conditioned(self) -> bool:
@@ -61,19 +66,31 @@ class DistanceModelConfig:
 
 
 class _Keypoints(nn.Module):
-    """The robot's keypoints (``robot.facts``): link-frame origins, and segments between two
-    links' origins with the number of interior points to place on each."""
+    """An arm's keypoints: the model's own points fixed in link frames (``points``), else the
+    robot description's (``robot.facts``): link-frame origins, segments between two links'
+    origins with the number of interior points to place on each, and points in link frames."""
 
-    def __init__(self, robot: RobotModel, base: Pose) -> None:
+    def __init__(
+        self,
+        robot: RobotModel,
+        base: Pose,
+        points: tuple[tuple[str, float, float, float], ...] | None = None,
+    ) -> None:
         super().__init__()
-        if not robot.facts.keypoints:
-            known = [n for n in ROBOT_NAMES if robot_facts(n).keypoints]
-            raise UnknownNameError("keypoint set", robot.name, known)
         self.kin = ArmKinematics(robot, base)
-        self.origins: list[str] = list(robot.facts.keypoints)
-        self.segments: list[tuple[str, str, int]] = list(robot.facts.keypoint_segments)
+        if points is not None:
+            self.origins: list[str] = []
+            self.segments: list[tuple[str, str, int]] = []
+            source = points
+        else:
+            if not robot.facts.keypoints:
+                known = [n for n in ROBOT_NAMES if robot_facts(n).keypoints]
+                raise UnknownNameError("keypoint set", robot.name, known)
+            self.origins = list(robot.facts.keypoints)
+            self.segments = list(robot.facts.keypoint_segments)
+            source = robot.facts.keypoint_points
         self.points: list[tuple[str, tuple[float, float, float]]] = [
-            (link, (x, y, z)) for link, x, y, z in robot.facts.keypoint_points
+            (link, (x, y, z)) for link, x, y, z in source
         ]
         self.count = len(self.origins) + sum(s[2] for s in self.segments) + len(self.points)
 
@@ -104,8 +121,8 @@ class PairDistanceModel(nn.Module):
         self.r1 = load_robot(config.robot1)
         self.r2 = load_robot(config.robot2)
         self.n1, self.n2 = self.r1.dof, self.r2.dof
-        self.kp1 = _Keypoints(self.r1, Pose())
-        self.kp2 = _Keypoints(self.r2, Pose(config.base2_xyz, config.base2_rpy))
+        self.kp1 = _Keypoints(self.r1, Pose(), config.points1)
+        self.kp2 = _Keypoints(self.r2, Pose(config.base2_xyz, config.base2_rpy), config.points2)
         self.n_cond = 1 if config.conditioned else 0
         n_feat = self.kp1.count * self.kp2.count + len(config.softmin_betas) + self.n_cond
         self.register_buffer("feat_mean", torch.zeros(n_feat, dtype=torch.float64))
@@ -190,7 +207,15 @@ def _config_from_card(card: dict[str, Any]) -> DistanceModelConfig:
         hidden=tuple(c["hidden"]),
         softmin_betas=tuple(c["softmin_betas"]),
         base2_range=tuple(c["base2_range"]) if c.get("base2_range") else None,
+        points1=_points(c.get("points1")),
+        points2=_points(c.get("points2")),
     )
+
+
+def _points(raw: Any) -> tuple[tuple[str, float, float, float], ...] | None:
+    if raw is None:
+        return None
+    return tuple((str(link), float(x), float(y), float(z)) for link, x, y, z in raw)
 
 
 def load_distance_file(path: Path, expect_pair: str | None = None) -> PairDistanceModel:

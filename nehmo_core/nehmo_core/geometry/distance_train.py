@@ -11,6 +11,7 @@ import torch
 from tqdm import tqdm
 
 from nehmo_core.errors import InvalidValueError
+from nehmo_core.geometry.collision_points import collision_points
 from nehmo_core.geometry.distance_data import (
     CONDITIONED_PAIRS,
     CUTOFF,
@@ -21,10 +22,17 @@ from nehmo_core.geometry.distance_model import DistanceModelConfig, PairDistance
 from nehmo_core.robots.registry import pair_base_range
 
 
+KEYPOINT_SOURCES = ("links", "geometry")
+"""``links``: the robot description's keypoints (link origins, segments, points); ``geometry``:
+points in the bulk of each link's collision geometry
+(:func:`~nehmo_core.geometry.collision_points.collision_points`), stored in the model's card."""
+
+
 @dataclass(frozen=True)
 class DistanceTrainSettings:
     """Optimizer settings. ``near_weight``/``near_scale`` up-weight samples close to contact;
-    ``collision_margin`` [m] is the margin the penalty on colliding samples pushes them below."""
+    ``collision_margin`` [m] is the margin the penalty on colliding samples pushes them below;
+    ``keypoints`` is where the model's keypoints come from (:data:`KEYPOINT_SOURCES`)."""
 
     hidden: tuple[int, ...] = (128, 128, 128)
     epochs: int = 40
@@ -38,8 +46,13 @@ class DistanceTrainSettings:
     calibration_share: float = 0.05
     target_false_safe: float = 0.015
     seed: int = 0
+    keypoints: str = "links"
 
     def __post_init__(self) -> None:
+        if self.keypoints not in KEYPOINT_SOURCES:
+            raise InvalidValueError(
+                "keypoints", f"must be one of {KEYPOINT_SOURCES}", self.keypoints
+            )
         for name in ("epochs", "batch"):
             if getattr(self, name) <= 0:
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))
@@ -47,10 +60,14 @@ class DistanceTrainSettings:
             raise InvalidValueError("lr", "must be > 0", self.lr)
 
 
-def new_model(pair: str, hidden: tuple[int, ...]) -> PairDistanceModel:
-    cell, _, b = pair_cell(pair)
+def new_model(pair: str, hidden: tuple[int, ...], keypoints: str = "links") -> PairDistanceModel:
+    cell, a, b = pair_cell(pair)
     arm2 = cell.arm(b)
     assert cell.arms[0].base.xyz == (0.0, 0.0, 0.0), "arm 1 of a pair cell sits at the origin"
+    points1 = points2 = None
+    if keypoints == "geometry":
+        points1 = collision_points(cell.arm(a).robot)
+        points2 = collision_points(arm2.robot)
     cfg = DistanceModelConfig(
         robot1=cell.arms[0].robot.name,
         robot2=arm2.robot.name,
@@ -58,6 +75,8 @@ def new_model(pair: str, hidden: tuple[int, ...]) -> PairDistanceModel:
         base2_rpy=arm2.base.rpy,
         hidden=hidden,
         base2_range=pair_base_range(pair) if pair in CONDITIONED_PAIRS else None,
+        points1=points1,
+        points2=points2,
     )
     return PairDistanceModel(cfg)
 
@@ -89,7 +108,7 @@ def train(
         )
     torch.manual_seed(settings.seed)
     t0 = time.perf_counter()
-    model = new_model(pair, settings.hidden)
+    model = new_model(pair, settings.hidden, settings.keypoints)
     # Hold out a calibration split: the output offset is chosen on it, never on test data.
     order = np.random.default_rng(settings.seed).permutation(len(q))
     n_cal = int(settings.calibration_share * len(q))

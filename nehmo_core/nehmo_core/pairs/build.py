@@ -8,7 +8,8 @@ folder that remembers what is done (run it again and it goes on where it stopped
    states equals the original's); each arm's reach fixes the base distances that can touch
    (:mod:`.reach`). Writes the pair manifest (``<pair>.pairs.yaml``) into the model folder.
 2. ``labels``: PyBullet distance labels (training, held-out and calibration sets, own seeds).
-3. ``distance``: the conditioned learned distance (``nehmo distance train``).
+3. ``distance``: the conditioned learned distance (``nehmo distance train``) on keypoints in the
+   bulk of each link's collision geometry (:mod:`nehmo_core.geometry.collision_points`).
 4. ``calibrate``: its conservative offset (``nehmo distance calibrate``).
 5. ``distance-certificate``: the learned distance on exact contact states (α, β).
 6. ``value:<game>``: the conditioned ``bc+sym`` value function of each side (one for a pair of
@@ -314,6 +315,7 @@ class PairBuild:
                 "distance", "train", "--pair", self.pair, "--data", str(data / "train.npz"),
                 "--test", str(data / "test.npz"), "--hidden", self.budget.hidden,
                 "--epochs", str(self.budget.epochs), "--seed", str(self.seed),
+                "--keypoints", "geometry",
             ],
         )  # fmt: skip
         return StageRecord([command], self._distance_figures())
@@ -325,6 +327,7 @@ class PairBuild:
             [
                 "distance", "calibrate", "--pair", self.pair, "--data", str(data / "calib.npz"),
                 "--test", str(data / "test.npz"), "--target", str(CALIBRATION_TARGET),
+                "--unbiased",
             ],
         )  # fmt: skip
         return StageRecord([command], self._distance_figures())
