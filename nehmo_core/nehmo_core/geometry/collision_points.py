@@ -7,9 +7,9 @@ Panda) they leave whole parts of the geometry between keypoints. :func:`collisio
 places points where the geometry is instead:
 
 1. For each link with collision geometry (links off the arm's chain too, such as a gripper's
-   fingers, which then count as part of the chain link they hang from), probe a grid (``grid`` [m] spacing) over the link's
-   bounding box in PyBullet and keep the probes inside the geometry (what PyBullet collides:
-   convex hulls of meshes, exact primitives).
+   fingers, which then count as part of the chain link they hang from), probe a grid (``grid``
+   [m] spacing) over the link's bounding box in PyBullet and keep the probes inside the
+   geometry (what PyBullet collides: convex hulls of meshes, exact primitives).
 2. Cluster the inside probes with k-means (seeded), ``k = ceil(extent / spacing)`` clusters for
    a link whose inside probes span ``extent`` [m] at their widest; each centre is a keypoint,
    fixed in the link's frame.
@@ -78,7 +78,7 @@ def collision_points(
         out: list[Point] = []
         links = world.links("arm")
         names = {index: link for link, index in links.items()}
-        for link, index in links.items():
+        for index in links.values():
             owner = index  # the chain link the points are fixed in
             while names[owner] not in robot.links and owner >= 0:
                 owner = pb.getJointInfo(body, owner, physicsClientId=c)[16]

@@ -21,7 +21,6 @@ from nehmo_core.geometry.distance_data import (
 from nehmo_core.geometry.distance_model import DistanceModelConfig, PairDistanceModel
 from nehmo_core.robots.registry import pair_base_range
 
-
 KEYPOINT_SOURCES = ("links", "geometry")
 """``links``: the robot description's keypoints (link origins, segments, points); ``geometry``:
 points in the bulk of each link's collision geometry
