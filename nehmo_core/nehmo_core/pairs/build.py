@@ -8,9 +8,8 @@ folder that remembers what is done (run it again and it goes on where it stopped
    states equals the original's); each arm's reach fixes the base distances that can touch
    (:mod:`.reach`). Writes the pair manifest (``<pair>.pairs.yaml``) into the model folder.
 2. ``labels``: PyBullet distance labels (training, held-out and calibration sets, own seeds).
-3. ``distance``: the conditioned learned distance (``nehmo distance train``) on keypoints in the
-   bulk of each link's collision geometry (:mod:`nehmo_core.geometry.collision_points`).
-4. ``calibrate``: its conservative offset (``nehmo distance calibrate``).
+3. ``distance``: the learned distance on keypoints in the collision geometry (``distance train``).
+4. ``calibrate``: kept unbiased (``nehmo distance calibrate --unbiased``): no offset.
 5. ``distance-certificate``: the learned distance on exact contact states (α, β).
 6. ``value:<game>``: the conditioned ``bc+sym`` value function of each side (one for a pair of
    the same robot; both games ``A_B_any`` and ``B_A_any`` otherwise), copied to the folder.
@@ -313,9 +312,8 @@ class PairBuild:
             "distance",
             [
                 "distance", "train", "--pair", self.pair, "--data", str(data / "train.npz"),
-                "--test", str(data / "test.npz"), "--hidden", self.budget.hidden,
-                "--epochs", str(self.budget.epochs), "--seed", str(self.seed),
-                "--keypoints", "geometry",
+                "--test", str(data / "test.npz"), "--hidden", self.budget.hidden, "--keypoints",
+                "geometry", "--epochs", str(self.budget.epochs), "--seed", str(self.seed),
             ],
         )  # fmt: skip
         return StageRecord([command], self._distance_figures())
@@ -326,8 +324,7 @@ class PairBuild:
             "calibrate",
             [
                 "distance", "calibrate", "--pair", self.pair, "--data", str(data / "calib.npz"),
-                "--test", str(data / "test.npz"), "--target", str(CALIBRATION_TARGET),
-                "--unbiased",
+                "--test", str(data / "test.npz"), "--target", str(CALIBRATION_TARGET), "--unbiased",
             ],
         )  # fmt: skip
         return StageRecord([command], self._distance_figures())
@@ -450,4 +447,4 @@ class PairBuild:
 
 
 CALIBRATION_TARGET = 0.009
-"""False-safe rate the learned distance's offset is calibrated to (the shipped models')."""
+"""False-safe rate whose offset the calibrate stage records (the distance itself stays unbiased)."""
