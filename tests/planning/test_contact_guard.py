@@ -1,6 +1,9 @@
-"""The contact guard: two Pandas that start 13 mm apart, where the learned fail-safe steps them
-into each other, part with the guard and collide without it; near contact the guard never
-returns a step that closes the real gap; far apart it changes nothing."""
+"""The contact guard: two Pandas that start 13 mm apart part with the guard; near contact the
+guard never returns a step that closes the real gap; far apart it changes nothing.
+
+With the first Panda build the learned fail-safe stepped these arms into each other when the
+guard was off; the rebuilt pair (certified δ 9.6 cm) keeps them apart without it, so this
+replay no longer shows the guard's need, and the random-command test is what can fail."""
 
 from __future__ import annotations
 
@@ -56,11 +59,6 @@ def test_the_start_is_collision_free_and_within_the_margin() -> None:
 
 def test_the_guard_parts_arms_that_start_in_contact(registry: ModelRegistry) -> None:
     assert _inter_arm(PlannerSettings().contact.clearance, registry) == []
-
-
-def test_without_the_guard_they_collide(registry: ModelRegistry) -> None:
-    """What the guard is for: the learned fail-safe alone steps the arms into each other."""
-    assert _inter_arm(0.0, registry) != []
 
 
 def _planner(registry: ModelRegistry) -> NehmoPlanner:
