@@ -28,15 +28,12 @@ from scipy.cluster.vq import kmeans2
 
 from nehmo_core.errors import InvalidValueError, ModelFileError
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel
+from nehmo_core.robots.model import ArmSpec, Cell, LinkPoint, Pose, RobotModel
 
 __all__ = ["POINT_SPACING", "collision_points"]
 
 POINT_SPACING = 0.08
 """[m] A link gets one keypoint per this much of its geometry's extent (at least one)."""
-
-Point = tuple[str, float, float, float]
-"""``(link, x, y, z)``: a keypoint fixed in a link's frame [m]."""
 
 
 def _link_frame(world: CellWorld, body: int, index: int) -> tuple[np.ndarray, np.ndarray]:
@@ -63,7 +60,7 @@ def _inside(world: CellWorld, body: int, index: int, probe: int, pts: np.ndarray
 
 def collision_points(
     robot: RobotModel, spacing: float = POINT_SPACING, grid: float = 0.015, seed: int = 0
-) -> tuple[Point, ...]:
+) -> tuple[LinkPoint, ...]:
     """Keypoints ``(link, x, y, z)`` in the bulk of every collision link of ``robot``, root to
     tip, rounded to 0.1 mm (see the module docstring)."""
     for name, value in (("spacing", spacing), ("grid", grid)):
@@ -75,7 +72,7 @@ def collision_points(
         body = world.body("arm")
         shape = pb.createCollisionShape(pb.GEOM_SPHERE, radius=1e-3, physicsClientId=c)
         probe = pb.createMultiBody(0, shape, basePosition=(50.0, 50.0, 50.0), physicsClientId=c)
-        out: list[Point] = []
+        out: list[LinkPoint] = []
         links = world.links("arm")
         names = {index: link for link, index in links.items()}
         for index in links.values():

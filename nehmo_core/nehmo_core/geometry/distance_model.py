@@ -30,7 +30,7 @@ from torch import nn
 from nehmo_core.errors import ModelFileError, UnknownNameError
 from nehmo_core.geometry.kinematics import ArmKinematics
 from nehmo_core.robots.loader import load_robot
-from nehmo_core.robots.model import Pose, RobotModel
+from nehmo_core.robots.model import LinkPoint, Pose, RobotModel
 from nehmo_core.robots.registry import (
     OPTIONAL,
     ROBOT_NAMES,
@@ -57,8 +57,8 @@ class DistanceModelConfig:
     # Each arm's keypoints ``(link, x, y, z)`` in link frames [m], when the model has its own
     # (:func:`~nehmo_core.geometry.collision_points.collision_points`); None: the robot
     # description's keypoints (link origins, segments and points).
-    points1: tuple[tuple[str, float, float, float], ...] | None = None
-    points2: tuple[tuple[str, float, float, float], ...] | None = None
+    points1: tuple[LinkPoint, ...] | None = None
+    points2: tuple[LinkPoint, ...] | None = None
 
     @property
     def conditioned(self) -> bool:
@@ -74,7 +74,7 @@ class _Keypoints(nn.Module):
         self,
         robot: RobotModel,
         base: Pose,
-        points: tuple[tuple[str, float, float, float], ...] | None = None,
+        points: tuple[LinkPoint, ...] | None = None,
     ) -> None:
         super().__init__()
         self.kin = ArmKinematics(robot, base)
@@ -212,7 +212,7 @@ def _config_from_card(card: dict[str, Any]) -> DistanceModelConfig:
     )
 
 
-def _points(raw: Any) -> tuple[tuple[str, float, float, float], ...] | None:
+def _points(raw: Any) -> tuple[LinkPoint, ...] | None:
     if raw is None:
         return None
     return tuple((str(link), float(x), float(y), float(z)) for link, x, y, z in raw)

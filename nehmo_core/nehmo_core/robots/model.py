@@ -34,6 +34,10 @@ class JointSpec:
     continuous: bool
 
 
+LinkPoint = tuple[str, float, float, float]
+"""``(link, x, y, z)``: a point fixed in a link's frame [m] (keypoints of learned distances)."""
+
+
 @dataclass(frozen=True)
 class RobotFacts:
     """What NeHMO knows about a robot beyond its URDF, from the robot registry
@@ -44,7 +48,7 @@ class RobotFacts:
     keypoint set, so no learned distance); CHOMP's sphere chains run through them too."""
     keypoint_segments: tuple[tuple[str, str, int], ...] = ()
     """``(link a, link b, k)``: ``k`` more keypoints evenly between the two links' origins."""
-    keypoint_points: tuple[tuple[str, float, float, float], ...] = ()
+    keypoint_points: tuple[LinkPoint, ...] = ()
     """``(link, x, y, z)``: more keypoints fixed in a link's frame [m] (e.g. a hand's sides,
     which no link origin on the flange axis sees)."""
     sphere_radius: float = 0.08
