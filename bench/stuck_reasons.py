@@ -1,9 +1,12 @@
 """Why NeHMO episodes end stuck: each stuck episode of the fresh tables, sorted by what held it.
 
     ./run python bench/stuck_reasons.py --seeds 41,42   # bench/results/stuck_reasons.{json,md}
+    ./run python bench/stuck_reasons.py --run OUT --out NAME   # bench/results/NAME.{json,md}
 
-Read from the episode logs of the ``nehmo`` rows (``bench/results/fresh/seed<S>/``; the logs are
-where those runs wrote them). For each stuck episode, with exact PyBullet distances:
+With ``--seeds``: the ``nehmo`` rows of the fresh tables (``bench/results/fresh/seed<S>/``; the
+logs are where those runs wrote them). With ``--run``: every row of one ``nehmo evaluate`` output
+folder (its ``summary.json`` and logs), by arm count for task sets (``--tasks``). For each stuck
+episode, with exact PyBullet distances:
 
 - ``goals closer than the floor``: with every arm at its goal, some pair is closer than the floor
   against settled peers (``settled_epsilon``: 1 cm; 2 cm when seeds 41 and 42 ran, 5 cm up to
@@ -67,10 +70,53 @@ def reason(path: str, world: CellWorld | None) -> tuple[str, CellWorld]:
     return REASONS[3], w
 
 
+def by_run(run: Path, name: str) -> int:
+    """The stuck episodes of every row of one ``nehmo evaluate`` output, by arm count."""
+    summary = json.loads((run / "summary.json").read_text())
+    out: dict[str, dict[str, dict[str, int]]] = {}
+    lines = [
+        f"# Why episodes end stuck: `{run.name}`",
+        "",
+        f"Written by `./run python bench/stuck_reasons.py --run {run} --out {name}` "
+        "(definitions in its docstring).",
+        "",
+        "| row | arms | episodes | stuck | " + " | ".join(REASONS) + " |",
+        "|---|---|---|---|" + "---|" * len(REASONS),
+    ]
+    for row in summary["rows"]:
+        groups: dict[int, list[dict]] = {}
+        for e in row["episodes"]:
+            log = Path(e["log"])
+            if not log.is_absolute() and not log.exists():  # relative to where it ran
+                log = next(run.glob(f"logs/*/{log.name}"), log)
+            groups.setdefault(int(e.get("arms", 0)), []).append({**e, "log": str(log)})
+        for arms, episodes in sorted(groups.items()):
+            counts: Counter[str] = Counter()
+            for e in episodes:
+                if e["outcome"] == "stuck":
+                    why, world = reason(e["log"], None)  # each task has its own cell
+                    world.close()
+                    counts[why] += 1
+            out.setdefault(row["row"], {})[str(arms)] = dict(counts)
+            lines.append(
+                f"| {row['row']} | {arms or '-'} | {len(episodes)} | {sum(counts.values())} | "
+                + " | ".join(str(counts.get(r, 0)) for r in REASONS)
+                + " |"
+            )
+            print(lines[-1], flush=True)
+    (RESULTS / f"{name}.json").write_text(json.dumps(out, indent=2) + "\n")
+    (RESULTS / f"{name}.md").write_text("\n".join(lines) + "\n")
+    return 0
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="41,42")
+    parser.add_argument("--run", type=Path, help="an evaluation's output folder (summary.json)")
+    parser.add_argument("--out", default="stuck_reasons_run", help="result name (with --run)")
     args = parser.parse_args()
+    if args.run is not None:
+        return by_run(args.run, args.out)
     out: dict[str, dict[str, dict[str, int]]] = {}
     lines = [
         "# Why NeHMO episodes end stuck",

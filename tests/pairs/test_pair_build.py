@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -23,27 +24,26 @@ ARM = "tiny_arm"
 PAIR = f"{ARM}_{ARM}_any"
 
 
-def _describe(folder: Path, name: str, facts: dict | None) -> None:
+def _describe(folder: Path, name: str, collision: bool = True) -> None:
     urdf = descriptions.DATA_DIR / "planar_2link" / "planar_2link.urdf"
-    data: dict = {"name": name, "urdf": str(urdf), "tip": "tip"}
-    if facts is not None:
-        data["facts"] = facts
     (folder / name).mkdir(parents=True)
+    if not collision:  # the same arm without collision geometry
+        text = re.sub(r"<collision>.*?</collision>", "", urdf.read_text(), flags=re.S)
+        urdf = folder / name / f"{name}.urdf"
+        urdf.write_text(text)
+    data: dict = {"name": name, "urdf": str(urdf), "tip": "tip"}
     (folder / name / "robot.yaml").write_text(yaml.safe_dump(data))
 
 
 @pytest.fixture(scope="module")
 def built(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, Path, dict]]:
-    """The planar two-link arm as a user's robot (keypoints along its links), its pair built at
-    the tiny budget into a user model folder."""
+    """The planar two-link arm as a user's robot (no keypoints in its description: the build
+    places its own in the collision geometry), its pair built at the tiny budget into a user
+    model folder."""
     root = tmp_path_factory.mktemp("pair")
     robots, models, work = root / "robots", root / "models", root / "work"
-    facts = {
-        "keypoints": ["base_link", "link_1", "link_2", "tip"],
-        "keypoint_segments": [["link_1", "link_2", 2], ["link_2", "tip", 2]],
-    }
-    _describe(robots, ARM, facts)
-    _describe(robots, "no_keypoints_arm", None)
+    _describe(robots, ARM)
+    _describe(robots, "bare_arm", collision=False)
     mp = pytest.MonkeyPatch()
     mp.setenv(descriptions.ENV, str(robots))
     mp.setenv(registry.MODELS_ENV, str(models))
@@ -153,10 +153,10 @@ def test_bad_input_is_one_clear_error(
         PairBuild(ARM, ARM, models=tmp_path / "m", work=tmp_path / "w", budget="huge")
     load_robot.cache_clear()
     build = PairBuild(
-        "no_keypoints_arm", "no_keypoints_arm", models=tmp_path / "m", work=tmp_path / "w2",
+        "bare_arm", "bare_arm", models=tmp_path / "m", work=tmp_path / "w2",
         budget="tiny", progress=False,
     )  # fmt: skip
-    with pytest.raises(ModelFileError, match="no keypoints"):
+    with pytest.raises(ModelFileError, match=r"link_1.*no <collision> geometry"):
         build.run()
     assert main(["pair", "build", "nope", ARM, "--models", str(tmp_path / "m")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
