@@ -77,8 +77,8 @@ def by_run(run: Path, name: str) -> int:
     lines = [
         f"# Why episodes end stuck: `{run.name}`",
         "",
-        f"Written by `./run python bench/stuck_reasons.py --run {run} --out {name}` "
-        "(definitions in its docstring).",
+        f"Written by `./run python bench/stuck_reasons.py --run OUT --out {name}`, OUT the "
+        "evaluation's output folder (definitions in its docstring).",
         "",
         "| row | arms | episodes | stuck | " + " | ".join(REASONS) + " |",
         "|---|---|---|---|" + "---|" * len(REASONS),
@@ -98,15 +98,23 @@ def by_run(run: Path, name: str) -> int:
                     world.close()
                     counts[why] += 1
             out.setdefault(row["row"], {})[str(arms)] = dict(counts)
-            lines.append(
-                f"| {row['row']} | {arms or '-'} | {len(episodes)} | {sum(counts.values())} | "
-                + " | ".join(str(counts.get(r, 0)) for r in REASONS)
-                + " |"
-            )
+            lines.append(f"| {row['row']} | {arms or '-'} | {len(episodes)} | {_cells(counts)}")
             print(lines[-1], flush=True)
+    _write(name, out, lines)
+    return 0
+
+
+def _cells(counts: Counter[str]) -> str:
+    """A table row's end: the stuck count, then the count of each reason."""
+    return (
+        " | ".join(str(n) for n in (sum(counts.values()), *(counts.get(r, 0) for r in REASONS)))
+        + " |"
+    )
+
+
+def _write(name: str, out: dict, lines: list[str]) -> None:
     (RESULTS / f"{name}.json").write_text(json.dumps(out, indent=2) + "\n")
     (RESULTS / f"{name}.md").write_text("\n".join(lines) + "\n")
-    return 0
 
 
 def main() -> int:
@@ -140,14 +148,9 @@ def main() -> int:
             if world is not None:
                 world.close()
             out.setdefault(setup, {})[str(seed)] = dict(counts)
-            lines.append(
-                f"| {setup} | {seed} | {sum(counts.values())} | "
-                + " | ".join(str(counts.get(r, 0)) for r in REASONS)
-                + " |"
-            )
+            lines.append(f"| {setup} | {seed} | {_cells(counts)}")
             print(lines[-1], flush=True)
-    (RESULTS / "stuck_reasons.json").write_text(json.dumps(out, indent=2) + "\n")
-    (RESULTS / "stuck_reasons.md").write_text("\n".join(lines) + "\n")
+    _write("stuck_reasons", out, lines)
     return 0
 
 

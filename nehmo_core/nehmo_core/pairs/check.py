@@ -26,19 +26,16 @@ def pair_names(robot_1: str, robot_2: str, tag: str = "any") -> tuple[str, ...]:
 
 
 def robot_figures(name: str, reach_samples: int, seed: int) -> dict[str, Any]:
-    """A robot's joint count, keypoints in its collision geometry, mirror map (or why it has
-    none) and reach; one clear error when it cannot have pair models (no collision geometry, no
-    base-yaw first joint)."""
-    from nehmo_core.geometry.collision_points import collision_points
+    """A robot's joint count, mirror map (or why it has none) and reach; one clear error when
+    it cannot have pair models (a moving link without collision geometry, from the loader; no
+    base-yaw first joint). The learned distance's keypoints are placed in the collision geometry
+    by the distance stage, so the description needs none."""
     from nehmo_core.geometry.symmetry import find_mirror_map
     from nehmo_core.pairs.reach import horizontal_reach
     from nehmo_core.planning.models.pair_frame import base_yaw_joint
     from nehmo_core.robots.loader import load_robot
 
     robot = load_robot(name)
-    # the learned distance's keypoints lie in the collision geometry (an error names a robot
-    # without any)
-    keypoints = len(collision_points(robot))
     if base_yaw_joint(robot) is None:
         raise ModelFileError(
             f"robot {name!r}: its first joint does not turn the arm about the base's vertical "
@@ -50,7 +47,7 @@ def robot_figures(name: str, reach_samples: int, seed: int) -> dict[str, Any]:
     except NehmoError as exc:
         found = {"none": str(exc)}
     reach = horizontal_reach(robot, reach_samples, seed)
-    return {"dof": robot.dof, "keypoints": keypoints, "mirror_map": found, "reach_m": reach}
+    return {"dof": robot.dof, "mirror_map": found, "reach_m": reach}
 
 
 def judge_mirror(result: dict[str, Any]) -> dict[str, Any]:
