@@ -99,8 +99,9 @@ class ExactGuardSettings:
 class ContactSettings:
     """The contact guard (``planning/stages/contact_guard.py``).
 
-    With the real geometry, a step may not bring the arm closer to a peer already within
-    ``clearance``; a step that would is shortened or replaced by one up the real distance.
+    With the real geometry, each peer on its own: a step may not bring the arm closer to a peer
+    already within ``clearance``, nor within ``clearance`` of one within ``clearance +
+    approach``; a step that would is shortened or replaced by one up the real distance.
     """
 
     # 2 cm let a UR5 and a Panda closing at 2 cm per tick touch (mixed_four, seed 60,
@@ -108,6 +109,15 @@ class ContactSettings:
     clearance: float = setting(
         0.04,
         "real distance to a peer below which no step may close it (0: off)",
+        "m",
+        ge=0,
+        le=1,
+    )
+    # two UR5s closing at full speed cover 3 cm in a tick: a gap just above the clearance
+    # went to contact in two ticks (seven UR5s, tasks seed 78, gen_7arm_s78_049)
+    approach: float = setting(
+        0.04,
+        "peers within clearance + this are watched: no step may end within clearance of them",
         "m",
         ge=0,
         le=1,

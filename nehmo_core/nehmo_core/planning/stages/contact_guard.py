@@ -4,20 +4,25 @@ that is already within a few centimetres, and step away from it when the fail-sa
 A command filter stage (settings group ``contact``; ``clearance`` 0, the ``paper`` preset, turns
 it off). It may shorten a command, or replace a command that would close a near-contact gap by
 one up the real distance's gradient; the V rows against every peer's worst case stay (they
-shaped the command it starts from, and it acts only within ``clearance`` of contact, inside
-every margin ε the rows keep).
+shaped the command it starts from, and it acts only within ``clearance + approach`` of contact,
+inside every margin ε the rows keep).
 
 Why: the guarantee of the V rows holds from states where V ≥ ε. An episode can start inside
 that margin (the scenario protocol only asks for collision-free starts; starts 1 mm apart
 occur), and there the learned V, which errs by centimetres near contact, can point the
-fail-safe's full-speed step ``ū·sign(∂V/∂q)`` into the peer. The guard checks, with PyBullet,
-every peer whose V reads below ``contact.value``: when the arms are closer than
-``contact.clearance`` the step (end and midpoint, the peers posed where they are now) may not
-bring them closer; a step that would is shortened (``contact.scales``: ½, ¼), and if none
-fits it is replaced by ``cap·ū·g/max|g|`` along the gradient ``g`` of the real distance over
-this arm's joints (central differences of ``contact.probe`` rad), kept within the row
-providers' rows and checked the same way (otherwise the arm stays still). Two arms that each
-do this do not close their gap to first order.
+fail-safe's full-speed step ``ū·sign(∂V/∂q)`` into the peer. With three or more arms inside
+one another's margins the paper's fail-safe, which looks only at the most critical peer, can
+also step into another one.
+
+The guard checks, with PyBullet, every peer whose V reads below ``contact.value``, each on its
+own: a peer closer than ``contact.clearance + contact.approach`` is watched, and the step (end
+and midpoint, the peers posed where they are now) may bring no watched peer closer than it is
+now, nor within ``contact.clearance``. A step that would is shortened (``contact.scales``: ½,
+¼); if none fits it is replaced by ``cap·ū·g/max|g|`` along the gradient ``g`` of the real
+distance to the nearest watched peer over this arm's joints (central differences of
+``contact.probe`` rad), else along the sum of the watched peers' unit gradients, kept within
+the row providers' rows and checked the same way (otherwise the arm stays still). Two arms that
+each do this do not close their gap to first order, however many peers each has near.
 """
 
 from __future__ import annotations
@@ -30,9 +35,17 @@ from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.problem import project_step
 from nehmo_core.planning.opt.tick import PeerValues, Tick
-from nehmo_core.planning.stages.exact_guard import WorldFilter, closest
+from nehmo_core.planning.stages.exact_guard import WorldFilter
 
 __all__ = ["ContactGuard", "contact_step"]
+
+
+def _distances(
+    world: CellWorld, arm_id: str, x: np.ndarray, peers: list[str], cutoff: float
+) -> np.ndarray:
+    """Arm ``arm_id`` posed at ``x``: its distance [m] to each of ``peers`` (already posed)."""
+    world.set_joint_positions(arm_id, x)
+    return np.array([world.distance(arm_id, p, cutoff) for p in peers])
 
 
 def _fits(
@@ -41,17 +54,32 @@ def _fits(
     q: np.ndarray,
     step: np.ndarray,
     peers: list[str],
-    now: float,
+    floors: np.ndarray,
     scales: tuple[float, ...],
 ) -> float:
-    """The first share of ``step`` [rad] in ``scales`` whose end and midpoint are no closer
-    than ``now`` (0 if none)."""
-    cutoff = now + 0.05
+    """The first share of ``step`` [rad] in ``scales`` whose end and midpoint keep every peer
+    of ``peers`` at least its floor away (0 if none)."""
+    cutoff = float(floors.max()) + 0.05
     for scale in scales:
-        ends = [closest(world, arm_id, q + f * scale * step, peers, cutoff) for f in (1.0, 0.5)]
-        if min(ends) >= now:
+        ends = [_distances(world, arm_id, q + f * scale * step, peers, cutoff) for f in (1.0, 0.5)]
+        if all(bool((d >= floors).all()) for d in ends):
             return scale
     return 0.0
+
+
+def _gradient(
+    world: CellWorld, arm_id: str, q: np.ndarray, peer: str, now: float, probe: float
+) -> np.ndarray:
+    """The real distance to ``peer`` differentiated over this arm's joints [m/rad]."""
+    grad = np.zeros(len(q))
+    cutoff = now + 2 * probe + 0.05
+    for j in range(len(q)):
+        dq = np.zeros(len(q))
+        dq[j] = probe
+        hi = _distances(world, arm_id, q + dq, [peer], cutoff)[0]
+        lo = _distances(world, arm_id, q - dq, [peer], cutoff)[0]
+        grad[j] = (hi - lo) / (2 * probe)
+    return grad
 
 
 def contact_step(
@@ -61,35 +89,38 @@ def contact_step(
     and whether it differs from ``u``."""
     s, arm_id, q = host.settings, host.arm_id, tick.q
     world.set_configuration(near)
-    peers = list(near)
     clearance = s.contact.clearance
-    now = closest(world, arm_id, q, peers, clearance + 0.01)
-    if now >= clearance:
+    watch = clearance + s.contact.approach
+    now = _distances(world, arm_id, q, list(near), watch + 0.01)
+    if now.min() >= watch:
         return u, False
+    # each watched peer on its own: a step may not end (or pass) closer to it than it is now,
+    # nor within ``clearance`` of it (a step that eased the nearest peer while closing on the
+    # next let three arms in one another's margins touch)
+    peers = [p for p, d in zip(near, now, strict=True) if d < watch]
+    gaps = now[now < watch]
+    floors = np.minimum(gaps, clearance)
     t = s.opt.t_plan
-    share = _fits(world, arm_id, q, u * t, peers, now, s.contact.scales)
+    share = _fits(world, arm_id, q, u * t, peers, floors, s.contact.scales)
     if share >= 1.0:
         return u, False
     if share > 0.0:
         return u * share, True
-    h = s.contact.probe
-    grad = np.zeros(len(q))
-    for j in range(len(q)):
-        dq = np.zeros(len(q))
-        dq[j] = h
-        cutoff = now + 2 * h + 0.05
-        hi = closest(world, arm_id, q + dq, peers, cutoff)
-        lo = closest(world, arm_id, q - dq, peers, cutoff)
-        grad[j] = (hi - lo) / (2 * h)
-    peak = float(np.abs(grad).max())
-    if peak < 1e-6:
-        return np.zeros_like(u), True
     y_max = t * s.opt.u_max * tick.cap
-    step = y_max * grad / peak
-    if tick.rows is not None and tick.rows.count:
-        step = project_step(step, tick.rows, y_max)
-    share = _fits(world, arm_id, q, step, peers, now, s.contact.scales)
-    return step * share / t, True
+    order = np.argsort(gaps)
+    grads = [_gradient(world, arm_id, q, peers[i], float(gaps[i]), s.contact.probe) for i in order]
+    # up the nearest peer's real distance, else up every watched peer's at once
+    units = [g / n for g in grads if (n := float(np.linalg.norm(g))) > 1e-9]
+    for grad in (grads[0], sum(units) if len(units) > 1 else None):
+        if grad is None or float(np.abs(grad).max()) < 1e-6:
+            continue
+        step = y_max * grad / float(np.abs(grad).max())
+        if tick.rows is not None and tick.rows.count:
+            step = project_step(step, tick.rows, y_max)
+        share = _fits(world, arm_id, q, step, peers, floors, s.contact.scales)
+        if share > 0.0:
+            return step * share / t, True
+    return np.zeros_like(u), True
 
 
 class ContactGuard(WorldFilter):
