@@ -1,7 +1,7 @@
 """``nehmo evaluate``: episodes of one setup for several planner rows, metrics from the logs.
 
     nehmo evaluate --setup dual_ur5 --planners nehmo,naive,chomp --episodes 100 --seed 0 \\
-        --out out/eval_dual --workers 2 --value-model /work/data/runs/ur5_ur5_bc_sym
+        --out out/eval_dual --workers 2 --value-model runs/ur5_ur5_bc_sym
 
 writes ``DIR/scenarios/<setup>_seed<seed>.json`` (the scenario set ``--seed`` selects),
 ``DIR/logs/<row>/episode_<i>/`` (one rosbag2 bag per episode), ``DIR/summary.json`` and
