@@ -41,7 +41,9 @@ def registry() -> ModelRegistry:
     return ModelRegistry()
 
 
-@pytest.mark.parametrize(("name", "seconds"), [("gen_4arm_s78_096", 3.0), ("gen_7arm_s78_049", 18.0)])
+@pytest.mark.parametrize(
+    ("name", "seconds"), [("gen_4arm_s78_096", 3.0), ("gen_7arm_s78_049", 18.0)]
+)
 def test_arms_in_one_anothers_margins_stay_apart(
     name: str, seconds: float, registry: ModelRegistry
 ) -> None:

@@ -104,6 +104,8 @@ class NehmoPlanner:
         # after a fail-safe step, a corner of the box that says nothing about the next solution)
         self._warm: np.ndarray | None = None
         self._hessian: np.ndarray | None = None  # the last solve's Lagrangian Hessian estimate
+        # the last command returned: it executes while the next one is planned
+        self._sent = np.zeros(self.robot.dof)
         self._fallback.reset()
         for stage in self.stages:
             stage.reset()
@@ -159,12 +161,24 @@ class NehmoPlanner:
         return self.opt.problem(target, now, rows, cap)
 
     def rows(self, q: np.ndarray) -> LinearRows | None:
-        """The row providers' rows at ``q`` (None without a row provider)."""
+        """The row providers' rows for a step from observed ``q`` (None without a row provider).
+
+        A command takes effect one tick after the observation it was planned from (the last one
+        runs meanwhile), so with ``self_clearance.ahead`` the rows are those of the pose the
+        last command returned reaches in one ``opt.tick``."""
         if not self._row_providers:
             return None
+        q = self.ahead(q)
         if len(self._row_providers) == 1:
             return self._row_providers[0].rows(q)
         return stack_rows(*(p.rows(q) for p in self._row_providers))
+
+    def ahead(self, q: np.ndarray) -> np.ndarray:
+        """Where observed ``q`` goes in one ``opt.tick`` under the command in flight (``q``
+        itself with ``self_clearance.ahead`` off)."""
+        if not self.settings.self_clearance.ahead:
+            return q
+        return q + self.settings.opt.tick * self._sent
 
     def keep_rows(self, u: np.ndarray, rows: LinearRows | None) -> np.ndarray:
         """``u`` [rad/s], or the nearest command whose step keeps ``rows``."""
@@ -238,6 +252,7 @@ class NehmoPlanner:
             for command_filter in self._filters:  # no peer to guard against: they see none
                 u = command_filter.filter(tick, NO_PEERS, u)
             self._warm = u * s.opt.t_plan
+            self._sent = u
             return PlanResult(u, Telemetry(time.perf_counter() - start, "unconstrained", **info))
         now = self.current(tick.q, tick.peers, tick.bounds)
         tick.rows = stack_rows(tick.rows, *(p.peer_rows(tick, now) for p in self._peer_rows))
@@ -262,6 +277,7 @@ class NehmoPlanner:
         tick.fail_safe = fail_safe
         for command_filter in self._filters:
             u = command_filter.filter(tick, now, u)
+        self._sent = u
         for objective in self._objectives:
             objective.after(tick, min_constraint)
         steered = {o.flag: tick.steered_by == o.name and not fail_safe for o in self._objectives}

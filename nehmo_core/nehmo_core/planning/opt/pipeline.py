@@ -86,6 +86,10 @@ class Host(Protocol):
         """The margin [m] rows of model ``model_index`` keep against peers at ``bound``."""
         ...
 
+    def ahead(self, q: np.ndarray) -> np.ndarray:
+        """Where observed ``q`` goes under the command in flight, where the next one starts."""
+        ...
+
 
 class Stage(Protocol):
     """Every stage has a name (its settings group), state it can forget, and resources it

@@ -7,7 +7,8 @@ stage (settings group)   kind                what it changes; what it keeps
 =======================  ==================  ===================================================
 ``hold``                 announcer           announces a speed bound at the goal and keeps it;
 (:mod:`.speed_bounds`)                       the V rows against every peer's worst case stay
-``self_clearance``       row provider        adds self-collision damper rows; V rows stay
+``self_clearance``       row provider and    adds self-collision damper rows; checks the step's
+                         command filter      end with the exact geometry; V rows stay
 ``silent_watch``         objective           steps out of a silent peer's path; V rows stay
 (:mod:`.silent_peers`)
 ``escape``               objective           leaves a stall on the safe set; V rows stay
@@ -79,8 +80,11 @@ def build_stages(host: Host) -> Staged:
     if s.escape.enabled:
         objectives.append(StallEscape(host))
     rows: list[RowProvider] = []
-    if s.self_clearance.enabled:
-        rows.append(SelfClearance(host.robot, s.self_clearance))
+    self_clearance = (
+        SelfClearance(host.robot, s.self_clearance, host) if s.self_clearance.enabled else None
+    )
+    if self_clearance is not None:
+        rows.append(self_clearance)
     accel = AccelLimits(host) if s.actuator.enabled and host.robot.facts.accel_limits else None
     if accel is not None:
         rows.append(accel)
@@ -89,6 +93,8 @@ def build_stages(host: Host) -> Staged:
         filters.append(ExactGuard(host))
     if s.contact.clearance > 0.0:  # it sees the command every stage before it shaped
         filters.append(ContactGuard(host))
+    if self_clearance is not None and s.self_clearance.check > 0.0:  # after every step change
+        filters.append(self_clearance)
     if accel is not None:  # last: what is sent must be reachable
         filters.append(accel)
     return Staged(

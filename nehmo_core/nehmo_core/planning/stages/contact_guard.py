@@ -111,8 +111,9 @@ def contact_step(
     grads = [_gradient(world, arm_id, q, peers[i], float(gaps[i]), s.contact.probe) for i in order]
     # up the nearest peer's real distance, else up every watched peer's at once
     units = [g / n for g in grads if (n := float(np.linalg.norm(g))) > 1e-9]
-    for grad in (grads[0], sum(units) if len(units) > 1 else None):
-        if grad is None or float(np.abs(grad).max()) < 1e-6:
+    candidates = [grads[0], np.sum(units, axis=0)] if len(units) > 1 else [grads[0]]
+    for grad in candidates:
+        if float(np.abs(grad).max()) < 1e-6:
             continue
         step = y_max * grad / float(np.abs(grad).max())
         if tick.rows is not None and tick.rows.count:

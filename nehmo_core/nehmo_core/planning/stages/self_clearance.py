@@ -14,6 +14,13 @@ the unit normal ``n`` from ``p_b`` to ``p_a``, ``y = t_plan·u`` the planned ste
 safety distance and ``ξ ∈ (0, 1]`` the share of the remaining margin a step may use. ``y = 0``
 always satisfies the rows, so they never make Opt infeasible by themselves; a pair already
 inside ``d_s`` may not get closer.
+
+A command runs from the pose the command in flight reaches (``self_clearance.ahead``), so the
+rows are built there. They are linear, and a pair's distance can have a ridge in a joint (a
+UR5's wrist against its upper arm, in wrist 2): a step up one side of it ends down the other.
+As a command filter the stage therefore checks, with the exact geometry, the end of the step
+(one ``opt.tick`` of it) for the pairs closer than ``self_clearance.check``: none may end below
+``min(d, d_s)``. A step that would is shortened (½, ¼) or, if none fits, the arm stays still.
 """
 
 from __future__ import annotations
@@ -25,7 +32,9 @@ import pybullet as pb
 
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.geometry.world_pool import WORLDS
+from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.problem import LinearRows, project_step
+from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.planning.settings import SelfClearanceSettings
 from nehmo_core.planning.stages.self_clearance_setup import distance_slopes, witness_order
 from nehmo_core.robots.model import ArmSpec, Cell, Pose, RobotModel
@@ -63,14 +72,19 @@ class SelfClearance:
 
     def reset(self) -> None:
         """The rows depend on the joint vector only (a cache of the last one is kept)."""
+        self.shortened = 0
 
     def __init__(
         self,
         robot: RobotModel,
         settings: SelfClearanceSettings | None = None,
+        host: Host | None = None,
     ) -> None:
         s = settings or SelfClearanceSettings()
         self.robot = robot
+        self.host = host  # the planner whose commands it checks (a command filter only with it)
+        self.check = s.check
+        self.shortened = 0
         self.influence, self.safety, self.gain = s.influence, s.safety, s.gain
         self.query_reach = s.query_reach
         self._lease = WORLDS.lease(("self", robot), lambda: _self_world(robot), self)
@@ -235,3 +249,35 @@ class SelfClearance:
             d[moving],
             tuple((x[0], x[1]) for x, keep in zip(pairs, moving, strict=True) if keep),
         )
+
+    def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
+        """``u``, or the share of it (½, ¼, else 0) whose step of one ``opt.tick`` from where
+        the command starts leaves no pair closer than ``check`` below ``min(d, safety)``."""
+        if self.host is None or self.check <= 0.0:
+            return u
+        q = self.host.ahead(tick.q)
+        rows = self.rows(q)
+        near = [
+            (pair, d) for pair, d in zip(rows.pairs, rows.distances, strict=True) if d < self.check
+        ]
+        if not near:
+            return u
+        index = {(a, b): (la, lb) for a, b, la, lb in self._pairs}
+        links = [index[pair] for pair, _ in near]
+        floors = np.minimum([d for _, d in near], self.safety) - 1e-6
+        step = self.host.settings.opt.tick * u
+        for scale in (1.0, 0.5, 0.25):
+            self._world.set_joint_positions("self", q + scale * step)
+            ends = [self._pair_distance(la, lb) for la, lb in links]
+            if (np.array(ends) >= floors).all():
+                self.shortened += scale < 1.0
+                return u * scale
+        self.shortened += 1
+        return np.zeros_like(u)
+
+    def _pair_distance(self, link_a: int, link_b: int) -> float:
+        """The posed links' signed distance [m] (the influence distance if farther)."""
+        pts = pb.getClosestPoints(
+            self._body, self._body, self.influence, link_a, link_b, physicsClientId=self._client
+        )
+        return float(min(p[8] for p in pts)) if pts else self.influence
