@@ -5,7 +5,8 @@ In ``gen_7arm_s78_024`` (seven UR5s, tasks seed 78) ``ur5_0``, folded (elbow 2.7
 through the rows' safety distance 0.5–1 mm per tick with every command on its rows, and its
 wrist touched its upper arm at 9.88 s: the rows are linear, and the distance of that pair is not
 (in wrist 2 it can have a ridge, so that a step up one side of it ends down the other). The
-replay is deterministic and still touches with ``self_clearance.check`` 0.
+replay is deterministic and still touches with ``self_clearance.check`` 0. So does a Panda of
+``mixed_four`` (seed 75, scenario 78), its hand on its own base at 2.6 s.
 """
 
 from __future__ import annotations
@@ -25,10 +26,13 @@ from nehmo_core.planning.opt.pipeline import read_tick
 from nehmo_core.planning.opt.problem import project_step
 from nehmo_core.planning.opt.tick import NO_PEERS
 from nehmo_core.planning.settings import PlannerSettings
+from nehmo_core.robots import load_cell
 from nehmo_core.robots.loader import load_robot
+from nehmo_core.sim.scenario_files import load_scenario_set
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
 
-TASK = Path(__file__).parents[1] / "data" / "self_contact" / "gen_7arm_s78_024.json"
+DATA = Path(__file__).parents[1] / "data" / "self_contact"
+TASK = DATA / "gen_7arm_s78_024.json"
 # ur5_0 of that task at 9.60 s of the run that touched: wrist_3_link 2.3 mm from upper_arm_link
 FOLDED = np.array([-1.5496736, -1.74180604, 2.75511026, -1.14050799, -1.5372209, 0.00078901])
 
@@ -39,6 +43,16 @@ def test_the_folded_arm_of_a_seven_arm_task_keeps_off_itself() -> None:
     kinds = {a: "nehmo" for a in task.cell.arm_ids}
     planners = build_planners(task.cell, kinds, task.scenario, 0.04, ModelRegistry(), settings)
     result = run_episode(task.cell, task.scenario, planners, EpisodeSettings(time_limit=20.0))
+    assert not result.collisions
+
+
+def test_a_panda_of_the_mixed_cell_keeps_its_hand_off_its_base() -> None:
+    scenario = load_scenario_set(DATA / "mixed_four_seed75_0078.json").scenarios[0]
+    cell = load_cell("mixed_four")
+    settings = PlannerSettings().override({"opt.deadline": 3600.0})
+    kinds = {a: "nehmo" for a in cell.arm_ids}
+    planners = build_planners(cell, kinds, scenario, 0.04, ModelRegistry(), settings)
+    result = run_episode(cell, scenario, planners, EpisodeSettings(time_limit=5.0))
     assert not result.collisions
 
 
