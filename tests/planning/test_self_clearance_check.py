@@ -28,8 +28,8 @@ from nehmo_core.planning.opt.tick import NO_PEERS
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
 from nehmo_core.robots.loader import load_robot
-from nehmo_core.sim.scenario_files import load_scenario_set
 from nehmo_core.robots.model import ArmSpec, Cell, Pose
+from nehmo_core.sim.scenario_files import load_scenario_set
 
 DATA = Path(__file__).parents[1] / "data" / "self_contact"
 TASK = DATA / "gen_7arm_s78_024.json"
