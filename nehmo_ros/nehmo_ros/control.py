@@ -258,6 +258,7 @@ class ArmController:
         self.last_observation = obs
         if send is not None:
             send(decision)
+        obs = replace(obs, in_flight=decision.velocity)
         if self._worker.submit(obs):
             self._submitted = obs
         self._tick += 1
@@ -291,6 +292,7 @@ class ArmController:
         self.last_observation = obs
         if send is not None:
             send(decision)
+        obs = replace(obs, in_flight=decision.velocity)
         if self._resuming and self._worker.submit(obs):  # busy with an old solve: next tick
             self._submitted, self._resuming = obs, False
         self._tick += 1
@@ -413,6 +415,11 @@ class ArmController:
         return np.asarray(u, dtype=np.float64)
 
     def _decide(self, obs: Observation) -> Decision:
+        # the planner's step starts where the command sent at this tick takes the arm (a hold
+        # or a late fail-safe is not the command its last plan() returned)
+        commanded = getattr(self.planner, "commanded", None)
+        if commanded is not None and obs.in_flight is not None:
+            commanded(obs.in_flight)
         if obs.q_self is None:
             return self._hold("no_own_state")
         if obs.own_untrusted:

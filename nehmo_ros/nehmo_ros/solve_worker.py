@@ -35,6 +35,8 @@ class Observation:
     goal: np.ndarray | None
     untrusted: tuple[str, ...] = ()  # peers with rejected or jumping states lately
     own_untrusted: bool = False  # the own arm's states were rejected or jumped lately
+    #: the command [rad/s] sent at this tick: it runs while this observation's solve does
+    in_flight: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

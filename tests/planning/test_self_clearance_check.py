@@ -97,8 +97,9 @@ def test_no_checked_step_ends_below_its_floor_where_rows_alone_let_some() -> Non
 def test_rows_are_built_where_the_command_in_flight_takes_the_arm() -> None:
     planner = _one_ur5()
     stage = planner.stage("self_clearance")
-    planner._sent = np.array([0.0, 0.0, 0.5, 0.0, 0.5, 0.0])
-    ahead = FOLDED + planner.settings.opt.tick * planner._sent
+    in_flight = np.array([0.0, 0.0, 0.5, 0.0, 0.5, 0.0])
+    planner.commanded(in_flight)
+    ahead = FOLDED + planner.settings.opt.tick * in_flight
     np.testing.assert_array_equal(planner.ahead(FOLDED), ahead)
     np.testing.assert_allclose(planner.rows(FOLDED).A, stage.rows(ahead).A)
     off = PlannerSettings().override({"self_clearance.ahead": False})

@@ -199,3 +199,40 @@ def test_the_status_of_a_missed_deadline_reads_back_with_its_solve_times() -> No
         assert later["late_solve_tick"] == "0"
     finally:
         c.stop()
+
+
+def test_the_planner_is_told_which_command_runs_while_it_plans() -> None:
+    """The command sent at a tick is the one in flight for that tick's solve: the planner's
+    own last result when on time, the fail-safe after a missed deadline."""
+
+    class Told(RecordingPlanner):
+        def __init__(self, delay: float = 0.0) -> None:
+            super().__init__(delay)
+            self.told: list[np.ndarray] = []
+
+        def commanded(self, u: np.ndarray) -> None:
+            self.told.append(np.array(u))
+
+    planner = Told(delay=0.1)
+    c = _controller(planner)
+    try:
+        _feed(c, 0.0, 1.0)
+        first = c.tick(0.0)  # nothing planned yet: zero, and tick 0's solve starts
+        _in_plan(planner)
+        missed = c.tick(0.04)  # tick 0's solve is late: the fail-safe is sent
+        assert missed.status == "deadline_missed"
+        planner.release.set()
+        _wait_idle(c)
+        planner.delay = 0.0
+        _feed(c, 0.08, 2.0)
+        sent = c.tick(0.08)  # tick 2's solve runs while this command does
+        _wait_idle(c)
+        on_time = c.tick(0.12)
+        _wait_idle(c)
+    finally:
+        c.stop()
+    np.testing.assert_array_equal(planner.told[0], first.velocity)
+    np.testing.assert_array_equal(planner.told[1], sent.velocity)
+    np.testing.assert_array_equal(sent.velocity, FAIL_SAFE)  # the late solve is dropped
+    np.testing.assert_array_equal(planner.told[2], on_time.velocity)
+    assert on_time.status == "optimal"

@@ -173,6 +173,12 @@ class NehmoPlanner:
             return self._row_providers[0].rows(q)
         return stack_rows(*(p.rows(q) for p in self._row_providers))
 
+    def commanded(self, u: ArrayLike) -> None:
+        """The command [rad/s] actually executing while the next :meth:`plan` runs, when it is
+        not the one the last ``plan()`` returned (a control loop that held the arm or sent a
+        fail-safe after a missed deadline says so before planning)."""
+        self._sent = one_joint_vector(self.robot.check_q(u, "u"), "u")
+
     def ahead(self, q: np.ndarray) -> np.ndarray:
         """Where observed ``q`` goes in one ``opt.tick`` under the command in flight (``q``
         itself with ``self_clearance.ahead`` off)."""
