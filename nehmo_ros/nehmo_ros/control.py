@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -245,11 +246,9 @@ class ArmController:
     def tick(
         self, now: float, stamp_ns: int = 0, send: Callable[[Decision], None] | None = None
     ) -> Decision:
-        """The command to publish now; starts the solve of this tick's observations.
-
-        ``now`` [s] is monotonic time (staleness), ``stamp_ns`` the ROS time of the tick. ``send``
-        gets the decision before that solve starts (the command need not share the interpreter).
-        """
+        """The command to publish now; starts the solve of this tick's observations. ``now``
+        [s] is monotonic time (staleness), ``stamp_ns`` the ROS time of the tick; ``send`` gets
+        the decision before that solve starts (the command need not share the interpreter)."""
         obs = self.observe(now, stamp_ns)
         if self._paused or self._resuming:
             return self._held_tick(obs, send)
@@ -258,8 +257,7 @@ class ArmController:
         self.last_observation = obs
         if send is not None:
             send(decision)
-        obs = replace(obs, in_flight=decision.velocity)
-        if self._worker.submit(obs):
+        if self._worker.submit(obs := replace(obs, in_flight=decision.velocity)):
             self._submitted = obs
         self._tick += 1
         return decision
@@ -292,8 +290,8 @@ class ArmController:
         self.last_observation = obs
         if send is not None:
             send(decision)
-        obs = replace(obs, in_flight=decision.velocity)
-        if self._resuming and self._worker.submit(obs):  # busy with an old solve: next tick
+        obs = replace(obs, in_flight=decision.velocity)  # busy with an old solve: next tick
+        if self._resuming and self._worker.submit(obs):
             self._submitted, self._resuming = obs, False
         self._tick += 1
         return decision
@@ -368,8 +366,6 @@ class ArmController:
 
     # -- the solve (worker thread) ----------------------------------------------------------
     def _solve(self, obs: Observation) -> Decision:
-        import time
-
         start = time.perf_counter()
         try:
             decision = self._decide(obs)
@@ -415,11 +411,8 @@ class ArmController:
         return np.asarray(u, dtype=np.float64)
 
     def _decide(self, obs: Observation) -> Decision:
-        # the planner's step starts where the command sent at this tick takes the arm (a hold
-        # or a late fail-safe is not the command its last plan() returned)
-        commanded = getattr(self.planner, "commanded", None)
-        if commanded is not None and obs.in_flight is not None:
-            commanded(obs.in_flight)
+        if obs.in_flight is not None:  # a hold or a late fail-safe is not its last plan()
+            self.planner.commanded(obs.in_flight)
         if obs.q_self is None:
             return self._hold("no_own_state")
         if obs.own_untrusted:

@@ -131,10 +131,8 @@ class FaultInjectingPlanner:
         return self.inner.fail_safe(q_self, peers, peer_bounds)
 
     def commanded(self, u: ArrayLike) -> None:
-        """The command in flight, passed to the inner planner (if it takes one)."""
-        inner = getattr(self.inner, "commanded", None)
-        if inner is not None:
-            inner(u)
+        """The command in flight, passed to the inner planner."""
+        self.inner.commanded(u)
 
     def release(self) -> None:
         """End a running or future hang."""

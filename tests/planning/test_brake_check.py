@@ -206,10 +206,12 @@ def test_a_peer_closing_on_a_holder_brakes_in_time_under_realistic_tracking(
     brake: float | None,
 ) -> None:
     """Closed loop under the ``realistic`` actuator model (its noise is seeded by the start):
-    the ``real_actuators`` preset without the braking check touches; with it, no contact."""
+    the ``real_actuators`` preset without the braking check (and without the contact guard's
+    approach band, which also parts these arms) touches; with it, no contact."""
     overrides = {"opt.deadline": 3600.0}
     if brake is not None:
         overrides["actuator.brake_clearance"] = brake
+        overrides["contact.approach"] = 0.0
     settings = PlannerSettings.preset("real_actuators", overrides)
     kinds = dict.fromkeys(FIVE.arm_ids, "nehmo")
     planners = build_planners(FIVE, kinds, CLOSING, 0.04, ModelRegistry(), settings)

@@ -66,6 +66,9 @@ class RecordingPlanner:
     ) -> np.ndarray:
         return FAIL_SAFE.copy()
 
+    def commanded(self, u: np.ndarray) -> None:
+        pass
+
     def reset(self) -> None:
         pass
 

@@ -49,6 +49,10 @@ from nehmo_core.robots.model import Cell
 
 __all__ = ["NehmoPlanner"]
 
+Bounds = Mapping[str, float]  # each peer's speed bound, a fraction of d̄
+Poses = Mapping[str, np.ndarray]  # each peer's joint vector
+States = Mapping[str, ArrayLike]  # each peer's joint vector, as a caller gives it
+
 
 class NehmoPlanner:
     """NeHMO (or Opt + any pair value model) for arm ``arm_id`` of ``cell``."""
@@ -104,8 +108,7 @@ class NehmoPlanner:
         # after a fail-safe step, a corner of the box that says nothing about the next solution)
         self._warm: np.ndarray | None = None
         self._hessian: np.ndarray | None = None  # the last solve's Lagrangian Hessian estimate
-        # the last command returned: it executes while the next one is planned
-        self._sent = np.zeros(self.robot.dof)
+        self._sent = np.zeros(self.robot.dof)  # the last command: it runs during the next plan
         self._fallback.reset()
         for stage in self.stages:
             stage.reset()
@@ -130,22 +133,12 @@ class NehmoPlanner:
         """The margin [m] rows of model ``model_index`` keep against peers at ``bound``."""
         return self.opt.group_margin(model_index, bound)
 
-    def evaluate(
-        self,
-        q: np.ndarray,
-        peers: Mapping[str, np.ndarray],
-        ids: list[str],
-        bounds: Mapping[str, float],
-    ) -> PeerValues:
+    def evaluate(self, q: np.ndarray, peers: Poses, ids: list[str], bounds: Bounds) -> PeerValues:
         """:meth:`PeerPairs.evaluate` (uncached)."""
         return self.opt.evaluate(q, peers, ids, bounds)
 
     def current(
-        self,
-        q: np.ndarray,
-        peers: Mapping[str, np.ndarray],
-        bounds: Mapping[str, float] | None = None,
-        only_known: bool = False,
+        self, q: np.ndarray, peers: Poses, bounds: Bounds | None = None, only_known: bool = False
     ) -> PeerValues:
         """:meth:`PeerPairs.current` (the last evaluation is kept)."""
         return self.opt.current(q, peers, bounds, only_known)
@@ -161,30 +154,22 @@ class NehmoPlanner:
         return self.opt.problem(target, now, rows, cap)
 
     def rows(self, q: np.ndarray) -> LinearRows | None:
-        """The row providers' rows for a step from observed ``q`` (None without a row provider).
-
-        A command takes effect one tick after the observation it was planned from (the last one
-        runs meanwhile), so with ``self_clearance.ahead`` the rows are those of the pose the
-        last command returned reaches in one ``opt.tick``."""
+        """The row providers' rows (None without one) for a step from observed ``q``: built
+        where the command in flight takes the arm (:meth:`ahead`), where the step starts."""
         if not self._row_providers:
             return None
-        q = self.ahead(q)
-        if len(self._row_providers) == 1:
-            return self._row_providers[0].rows(q)
-        return stack_rows(*(p.rows(q) for p in self._row_providers))
+        return stack_rows(*(p.rows(self.ahead(q)) for p in self._row_providers))
 
     def commanded(self, u: ArrayLike) -> None:
-        """The command [rad/s] actually executing while the next :meth:`plan` runs, when it is
-        not the one the last ``plan()`` returned (a control loop that held the arm or sent a
-        fail-safe after a missed deadline says so before planning)."""
+        """The command [rad/s] running while the next :meth:`plan` does, when a control loop
+        sent another than the last ``plan()`` result (a hold, a late fail-safe)."""
         self._sent = one_joint_vector(self.robot.check_q(u, "u"), "u")
 
     def ahead(self, q: np.ndarray) -> np.ndarray:
         """Where observed ``q`` goes in one ``opt.tick`` under the command in flight (``q``
         itself with ``self_clearance.ahead`` off)."""
-        if not self.settings.self_clearance.ahead:
-            return q
-        return q + self.settings.opt.tick * self._sent
+        s = self.settings
+        return q + s.opt.tick * self._sent if s.self_clearance.ahead else q
 
     def keep_rows(self, u: np.ndarray, rows: LinearRows | None) -> np.ndarray:
         """``u`` [rad/s], or the nearest command whose step keeps ``rows``."""
@@ -200,18 +185,13 @@ class NehmoPlanner:
         return self.keep_rows(self._fallback.command(now, cap * self.settings.opt.u_max), rows)
 
     def fail_safe(
-        self,
-        q_self: ArrayLike,
-        peers: Mapping[str, ArrayLike],
-        peer_bounds: Mapping[str, float] | None = None,
+        self, q_self: ArrayLike, peers: States, peer_bounds: Bounds | None = None
     ) -> np.ndarray:
         """The fail-safe command (dof,) [rad/s] at this state: ``ū·sign(∂V/∂q¹)`` of the most
-        critical constrained peer, kept
-        within the row providers' rows; zero (hold) when no peer is constrained.
-
-        Cheap (one value-and-gradient evaluation); a ROS node computes it ahead of each solve
-        so that a solve that overruns its tick still has a safe command to fall back on (a solve
-        from the same state then reuses that evaluation).
+        critical constrained peer, kept within the row providers' rows; zero (hold) when no
+        peer is constrained. Cheap (one value-and-gradient evaluation); a ROS node computes it
+        ahead of each solve so that a solve that overruns its tick still has a safe command to
+        fall back on (a solve from the same state then reuses that evaluation).
         Peers missing from ``peers`` are left out (the caller decides what a missing peer means).
         ``peer_bounds`` and the arm's own speed cap as in :meth:`plan`.
         """
@@ -224,11 +204,7 @@ class NehmoPlanner:
 
     # -- one tick -----------------------------------------------------------------------------
     def plan(
-        self,
-        q_self: ArrayLike,
-        peers: Mapping[str, ArrayLike],
-        q_goal: ArrayLike,
-        peer_bounds: Mapping[str, float] | None = None,
+        self, q_self: ArrayLike, peers: States, q_goal: ArrayLike, peer_bounds: Bounds | None = None
     ) -> PlanResult:
         """One tick: the command for ``q_self`` among ``peers`` toward ``q_goal``.
 

@@ -109,6 +109,11 @@ class Planner(Protocol):
         peer_bounds: Mapping[str, float] | None = None,
     ) -> np.ndarray | None: ...
 
+    def commanded(self, u: ArrayLike) -> None:
+        """The command [rad/s] that runs while the next ``plan`` does, when a control loop sent
+        another than the last ``plan`` result (a hold, a late fail-safe)."""
+        ...
+
     def reset(self) -> None: ...
 
 
@@ -129,6 +134,9 @@ class WithoutValues:
     ) -> np.ndarray | None:
         """None: holding still is the safe act of a planner without a value function."""
         return None
+
+    def commanded(self, u: ArrayLike) -> None:
+        """Nothing: its next command does not depend on the one in flight."""
 
 
 def goal_error(q: np.ndarray, goal: np.ndarray, robot: RobotModel, wrap: bool) -> np.ndarray:

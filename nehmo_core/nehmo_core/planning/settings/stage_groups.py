@@ -236,16 +236,13 @@ class SelfClearanceSettings:
     gain: float = setting(
         0.5, "share of the distance above safety a pair may close per step", gt=0, le=1
     )
-    # rows at the observed pose let a folded UR5 creep 0.5-1 mm per tick through the safety
-    # distance while its wrist flipped every tick, into a self-contact (seven UR5s, tasks seed
-    # 78, gen_7arm_s78_024): the command applies from the pose the last one reaches
+    # a command runs from where the one in flight takes the arm (one tick after it was planned)
     ahead: bool = setting(
         True,
         "rows at the pose the command in flight reaches in one opt.tick (false: the observed pose)",
     )
-    # the rows are linear and a link's distance can have a ridge in a joint (a UR5's
-    # wrist_3_link against its upper arm, in wrist 2): a step up one side of it ends down the
-    # other, 0.5 mm per tick, until the links touch (gen_7arm_s78_024)
+    # linear rows let a folded UR5 creep 0.5-1 mm a tick through the safety distance into a
+    # self-contact (a ridge of its wrist-upper arm distance in wrist 2; gen_7arm_s78_024)
     check: float = setting(
         0.02,
         "pairs closer than this are checked at the step's end with the exact geometry: none "
