@@ -95,6 +95,7 @@ class SelfClearance:
             (a, b, self._world.link_index("self", a), self._world.link_index("self", b))
             for a, b in robot.self_collision_pairs()
         ]
+        self._links = {(a, b): (la, lb) for a, b, la, lb in self._pairs}
         ours = self._world.joint_indices("self")
         # for the Jacobian: each of our joints' axis (in its child link's URDF frame) and kind,
         # and per link the columns of the joints that move it (the link's own and its ancestors')
@@ -183,11 +184,9 @@ class SelfClearance:
         self._world.set_joint_positions("self", q)
         out = {}
         for a, b, la, lb in self._pairs:
-            pts = pb.getClosestPoints(
-                self._body, self._body, self.influence, la, lb, physicsClientId=self._client
-            )
-            if pts:
-                out[(a, b)] = float(min(p[8] for p in pts))
+            d = self._pair_distance(la, lb)
+            if d is not None:
+                out[(a, b)] = d
         return out
 
     def rows(self, q: np.ndarray) -> SelfClearanceRows:
@@ -262,22 +261,21 @@ class SelfClearance:
         ]
         if not near:
             return u
-        index = {(a, b): (la, lb) for a, b, la, lb in self._pairs}
-        links = [index[pair] for pair, _ in near]
+        links = [self._links[pair] for pair, _ in near]
         floors = np.minimum([d for _, d in near], self.safety) - 1e-6
         step = self.host.settings.opt.tick * u
         for scale in (1.0, 0.5, 0.25):
             self._world.set_joint_positions("self", q + scale * step)
             ends = [self._pair_distance(la, lb) for la, lb in links]
-            if (np.array(ends) >= floors).all():
+            if all(d is None or d >= f for d, f in zip(ends, floors, strict=True)):
                 self.shortened += scale < 1.0
                 return u * scale
         self.shortened += 1
         return np.zeros_like(u)
 
-    def _pair_distance(self, link_a: int, link_b: int) -> float:
-        """The posed links' signed distance [m] (the influence distance if farther)."""
+    def _pair_distance(self, link_a: int, link_b: int) -> float | None:
+        """The posed links' signed distance [m] (None if farther than ``influence``)."""
         pts = pb.getClosestPoints(
             self._body, self._body, self.influence, link_a, link_b, physicsClientId=self._client
         )
-        return float(min(p[8] for p in pts)) if pts else self.influence
+        return float(min(p[8] for p in pts)) if pts else None
