@@ -290,8 +290,8 @@ class ArmController:
         self.last_observation = obs
         if send is not None:
             send(decision)
-        obs = replace(obs, in_flight=decision.velocity)  # busy with an old solve: next tick
-        if self._resuming and self._worker.submit(obs):
+        obs = replace(obs, in_flight=decision.velocity)
+        if self._resuming and self._worker.submit(obs):  # busy with an old solve: next tick
             self._submitted, self._resuming = obs, False
         self._tick += 1
         return decision

@@ -158,7 +158,8 @@ class NehmoPlanner:
         where the command in flight takes the arm (:meth:`ahead`), where the step starts."""
         if not self._row_providers:
             return None
-        return stack_rows(*(p.rows(self.ahead(q)) for p in self._row_providers))
+        start = self.ahead(q)
+        return stack_rows(*(p.rows(start) for p in self._row_providers))
 
     def commanded(self, u: ArrayLike) -> None:
         """The command [rad/s] running while the next :meth:`plan` does, when a control loop
