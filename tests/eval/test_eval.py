@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nehmo_core.errors import InvalidValueError, NehmoError, UnknownNameError
+from nehmo_core.errors import InvalidValueError, ModelFileError, NehmoError, UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.eval.metrics import EpisodeResult, aggregate, evaluate_log, planning_times
@@ -27,6 +27,7 @@ from nehmo_core.planning.models.value_model import PairValueModel
 from nehmo_core.planning.nehmo import NehmoPlanner
 from nehmo_core.planning.opt.interface import PlanResult, Telemetry, WithoutValues
 from nehmo_core.robots import load_cell
+from nehmo_core.robots.loader import CELLS_DIR
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenario_files import ScenarioFileError, load_scenario_set, save_scenario_set
 from nehmo_core.sim.scenarios import Scenario, generate_scenario_set, sample_scenario, scenario_rng
@@ -272,6 +273,20 @@ def test_rows_and_value_model_sources_are_checked() -> None:
         parse_row("chomp/naive", DUAL)
     with pytest.raises(UnknownNameError, match="setup"):
         get_setup("quad_ur5")
+
+
+def test_a_cell_file_is_a_setup_of_its_own(tmp_path: Path) -> None:
+    """``--setup my_cell.yaml``: the user's cell, named by its file's ``name``, with the paper's
+    two-arm rules; a missing file is one clear error."""
+    text = (
+        (CELLS_DIR / "dual_panda.yaml").read_text().replace("name: dual_panda", "name: my_pandas")
+    )
+    (tmp_path / "mine.yaml").write_text(text)
+    setup = get_setup(str(tmp_path / "mine.yaml"))
+    assert (setup.name, setup.time_limit, setup.success_tolerance) == ("my_pandas", 20.0, 0.1)
+    assert setup.load_cell().arm_ids == ("panda_0", "panda_1")
+    with pytest.raises(ModelFileError, match="cell file not found"):
+        get_setup(str(tmp_path / "missing.yaml"))
     specs = parse_value_models(["synthetic", "nehmo_no_sym=/runs/bc"])
     assert [(s.kind, s.source) for s in specs] == [
         (None, "synthetic"),

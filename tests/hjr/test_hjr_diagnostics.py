@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.hjr.diagnostics import pde_diagnostics
+from nehmo_core.hjr.diagnostics import learned_value, pde_diagnostics, unlearned_warning
 from nehmo_core.hjr.model_files import SHIPPED_VALUE_FUNCTIONS, load_value_function
 
 
@@ -52,6 +52,40 @@ def test_every_shipped_bc_model_learned_more_than_its_boundary(name: str, varian
     ratio, fall = BELOW_BAR.get(name, (0.5, 0.02))
     assert d.residual_ratio < ratio
     assert d.mean_fall_at_horizon > fall
+
+
+class _Ripples(torch.nn.Module):
+    """A residual network of sine ripples (3 mm high, steep) in the controlled arm's joints."""
+
+    def __init__(self, own: int) -> None:
+        super().__init__()
+        self.own = own
+        self.height = torch.nn.Parameter(torch.tensor(0.003))
+
+    def forward(self, inputs: torch.Tensor) -> torch.Tensor:
+        return self.height * torch.sin(300.0 * inputs[:, 1 : 1 + self.own]).sum(dim=1)
+
+
+def test_a_learned_value_a_trivial_one_and_ripples_are_told_apart() -> None:
+    """The shipped UR5 bc model reads as learned; with its residual network at zero it is the
+    trivial ``V = l``; with ripples in place of it, it meets the PDE almost everywhere (the
+    own-joint slopes make ``H ≥ 0``) without falling below ``l``: steep, and not learned."""
+    vf = load_value_function("ur5_ur5", variant="bc")
+    learned = pde_diagnostics(vf, samples=1024)
+    assert learned_value(learned)
+    assert learned.slope_ratio < 0.5 and learned.model_fall_share > 0.4
+    with torch.no_grad():
+        vf.network.siren.output.weight.zero_()
+        vf.network.siren.output.bias.zero_()
+    trivial = pde_diagnostics(vf, samples=1024)
+    assert not learned_value(trivial) and trivial.slope_ratio == pytest.approx(0.0, abs=1e-6)
+    vf.network.siren = _Ripples(vf.system.n1)
+    rippled = pde_diagnostics(vf, samples=1024)
+    assert not learned_value(rippled)
+    assert rippled.slope_ratio > 2.0
+    assert rippled.model_fall_share < 0.5 * rippled.must_fall_share
+    assert rippled.mean_fall_at_horizon < 0.005
+    assert "learned little" in unlearned_warning("ur5_ur5", rippled.to_dict())
 
 
 def test_diagnostics_are_reproducible_per_seed() -> None:

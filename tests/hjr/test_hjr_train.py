@@ -230,6 +230,38 @@ def test_squared_dirichlet_term(pretraining: bool) -> None:
     torch.testing.assert_close(b["loss"], 40.0 * (on * on).mean() + b["pde"])
 
 
+@pytest.mark.parametrize("variant", ["bc", "exact", "deepreach"])
+def test_the_gradient_term_adds_the_residual_networks_mean_l1_slope(variant: str) -> None:
+    """``gradient_weight`` adds ``weight·mean ‖∇ₓNN‖₁`` of the residual network (bc variants)
+    to the loss and nothing else; DeepReach has no residual network, so nothing is added."""
+    from nehmo_core.hjr.networks import ValueNetwork
+
+    system = TwoLinkPair()
+    net = ValueNetwork(
+        system,
+        variant,
+        NetworkSettings(width=32, hidden_layers=1),
+        generator=torch.Generator().manual_seed(5),
+    )
+    gen = torch.Generator().manual_seed(6)
+    x = system.sample_states(256, gen)
+    tau = torch.rand(256, generator=gen) * system.horizon
+    mask = torch.arange(256) >= 200
+    plain = TrainSettings(variant=variant)
+    steep = replace(plain, gradient_weight=0.5)
+    a = loss_terms(net, plain, tau, x, mask, pretraining=False)
+    b = loss_terms(net, steep, tau, x, mask, pretraining=False)
+    torch.testing.assert_close(b["pde"], a["pde"])
+    xx = x.clone().requires_grad_(True)
+    (slope,) = torch.autograd.grad(net.siren(net.network_input(tau, xx)).sum(), xx)
+    extra = 0.0 if variant == "deepreach" else 0.5 * slope.abs().sum(dim=1).mean()
+    torch.testing.assert_close(b["loss"], a["loss"] + extra)
+    pre = loss_terms(net, steep, tau, x, mask, pretraining=True)
+    torch.testing.assert_close(pre["loss"], loss_terms(net, plain, tau, x, mask, True)["loss"])
+    with pytest.raises(InvalidValueError, match="gradient_weight"):
+        TrainSettings(gradient_weight=-1.0)
+
+
 def test_the_12d_preset_and_bad_dirichlet_losses() -> None:
     preset = TrainSettings.preset("cpu_12d", variant="bc")
     assert preset.dirichlet_loss == "l2" and preset.network.width == 128
@@ -264,6 +296,8 @@ def test_cli_resume_without_a_checkpoint_is_an_error(
         ("--width", "0", "`--width` must be >= 1"),
         ("--batch-size", "0", "`--batch-size` must be > 0"),
         ("--samples", "1.5", "`--samples` must be a positive whole count"),
+        ("--gradient-weight", "-1", "`--gradient-weight` must be >= 0"),
+        ("--omega0", "0", "`--omega0` must be > 0"),
     ],
 )
 def test_cli_errors_name_the_option_typed(

@@ -71,7 +71,8 @@ def test_the_pipeline_writes_models_manifest_and_a_card_of_every_stage(built) ->
     stages = card["stages"]
     assert list(stages) == [
         "check", "labels", "distance", "calibrate", "distance-certificate",
-        f"value:{PAIR}", f"certify:{PAIR}", f"falsify:{PAIR}",
+        f"value:{PAIR}", f"certify:{PAIR}", f"falsify:{PAIR}", "visit",
+        f"certify-visited:{PAIR}",
     ]  # fmt: skip
     assert all(s["wall_time_s"] > 0 for s in stages.values())
     assert card["total_wall_time_s"] == pytest.approx(sum(card["wall_time_s"].values()))
@@ -87,11 +88,29 @@ def test_the_pipeline_writes_models_manifest_and_a_card_of_every_stage(built) ->
     assert any(c.startswith(f"nehmo distance generate --pair {PAIR}") for c in commands)
     assert any(c.startswith(f"nehmo train --system {PAIR} --variant bc+sym") for c in commands)
     assert any(c.startswith(f"nehmo verify --model {PAIR}") for c in commands)
+    # the value stage measures the network against its PDE; a tiny budget's network is told
+    # apart from a learned value, and the card says so in its warnings
+    check = stages[f"value:{PAIR}"]["figures"]["below_boundary"]
+    assert {"residual_ratio", "slope_ratio", "model_fall_share"} <= set(check["pde"])
+    unlearned = [w for w in card["warnings"] if w.startswith(f"value function {PAIR} learned")]
+    assert len(unlearned) == (0 if check["learned"] else 1)
     falsified = stages[f"falsify:{PAIR}"]["figures"]
     assert falsified["states"] == 40 and 0 <= falsified["contacts"] <= 40
-    # the certificate entered the value function's card, the planner's ε reads it
+    # the planner ran with the fresh models on the three visit cells, one episode each, at base
+    # distances inside the pair's range
+    cells = stages["visit"]["figures"]["cells"]
+    assert [c["cell"] for c in cells] == ["visit_0", "visit_1", "visit_2"]
+    assert all(c["episodes"] == 1 and 0.25 <= c["base_distance_m"] <= 2.05 for c in cells)
+    assert any(c.startswith("nehmo evaluate --setup") for c in commands)
+    visited = stages[f"certify-visited:{PAIR}"]["figures"]
+    assert visited["distribution"] == "visited" and visited["samples"] == 60
+    assert stages[f"certify:{PAIR}"]["figures"]["distribution"] == "uniform"
+    # both certificates entered the value function's card, the planner's ε reads them
     value_card = json.loads((models / f"value_{PAIR}_bc_sym.json").read_text())["card"]
-    assert [c["tau"] for c in value_card["certificates"]] == [0.3]
+    assert [(c["tau"], c["distribution"]["name"]) for c in value_card["certificates"]] == [
+        (0.3, "uniform"),
+        (0.3, "visited"),
+    ]
     assert value_card["pair_card"] == f"{PAIR}.card.json"
 
 
@@ -124,7 +143,8 @@ def test_a_build_goes_on_where_it_stopped(built, monkeypatch: pytest.MonkeyPatch
     monkeypatch.setenv(registry.MODELS_ENV, str(models))
     state = json.loads((work / "state.json").read_text())
     before = dict(state["stages"])
-    del state["stages"][f"falsify:{PAIR}"], state["stages"]["card"]  # as if stopped there
+    for stage in (f"falsify:{PAIR}", "visit", f"certify-visited:{PAIR}", "card"):
+        del state["stages"][stage]  # as if stopped there
     (work / "state.json").write_text(json.dumps(state))
     manifest = models / f"{PAIR}.pairs.yaml"
     written = manifest.read_text()
@@ -138,6 +158,9 @@ def test_a_build_goes_on_where_it_stopped(built, monkeypatch: pytest.MonkeyPatch
     assert (
         after[f"falsify:{PAIR}"]["figures"]["seed"] == before[f"falsify:{PAIR}"]["figures"]["seed"]
     )
+    # the visit cells' evaluations were kept: none ran again, and they read the same
+    assert after["visit"]["commands"] == []
+    assert after["visit"]["figures"] == before["visit"]["figures"]
     with pytest.raises(InvalidValueError, match="budget = 'tiny'"):
         PairBuild(ARM, ARM, models=models, work=work, budget="standard", progress=False)
 

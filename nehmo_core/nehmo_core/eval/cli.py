@@ -41,7 +41,12 @@ __all__ = ["add_arguments", "run"]
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     where = parser.add_mutually_exclusive_group(required=True)
-    where.add_argument("--setup", choices=sorted(SETUPS), help="evaluation setup")
+    where.add_argument(
+        "--setup",
+        metavar="SETUP",
+        help=f"evaluation setup ({', '.join(sorted(SETUPS))}) or a cell file (*.yaml: 20 s "
+        "episodes, success within 0.1 rad)",
+    )
     where.add_argument(
         "--tasks",
         type=Path,

@@ -10,6 +10,7 @@ episode by construction.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
@@ -80,6 +81,8 @@ def scenario_set_for(
             made = generate_scenario_set(cell, seed, count, accept, max_candidates, meta, progress)
     else:
         raise UnknownNameError("scenario filter", setup.scenario_filter, SCENARIO_FILTERS)
+    if setup.cell.endswith((".yaml", ".yml")):  # a user's cell: its file, which loads anywhere
+        made = dataclasses.replace(made, cell=str(Path(setup.cell).resolve()))
     if path is not None:
         save_scenario_set(made, path)
     return made

@@ -110,11 +110,19 @@ SETUPS: dict[str, Setup] = {
 }
 
 
+USER_CELL_TIME_LIMIT = 20.0  # [s] a user's cell file: the paper's two-arm episode length
+
+
 def get_setup(name: str) -> Setup:
-    """The setup called ``name``; raises listing the valid names."""
-    if name not in SETUPS:
-        raise UnknownNameError("setup", name, SETUPS)
-    return SETUPS[name]
+    """The setup called ``name``, or for a cell file (``*.yaml``) a setup of that cell with the
+    paper's two-arm rules (20 s, every arm within 0.1 rad L2 of its goal at once, named after the
+    file's ``name``); raises listing the valid names."""
+    if name in SETUPS:
+        return SETUPS[name]
+    if name.endswith((".yaml", ".yml")):
+        cell = load_cell(name)
+        return Setup(cell.name, name, USER_CELL_TIME_LIMIT, description=f"the cell of {name}")
+    raise UnknownNameError("setup", name, [*SETUPS, "<a cell file>.yaml"])
 
 
 def parse_row(row: str, cell: Cell) -> dict[str, str]:

@@ -13,7 +13,11 @@ clearly better than that trivial level.
 - the model's mean PDE residual ``|∂W/∂τ − min(0, H(x, ∇W))|`` and the same for ``W = l̂``,
   in the network's normalized units (the training loss's ``pde`` term), and their ratio;
 - the share of states where ``V`` must fall below ``l`` (``H(x, ∇l) < 0``);
-- how far ``V(T, ·)`` falls below ``l`` [m] (the mean, and the 99th percentile of ``l − V``).
+- how far ``V(T, ·)`` falls below ``l`` [m] (the mean, and the 99th percentile of ``l − V``);
+- for the ``bc`` variants (``W = l̂ + NN``, uncapped): the share of states where the model's own
+  ``H(x, ∇W) < 0``, and ``mean ‖∇ₓNN‖₁ / mean ‖∇ₓl̂‖₁``. A network that meets the PDE with steep
+  ripples instead of a value (:class:`~nehmo_core.hjr.train_settings.TrainSettings`'
+  ``gradient_weight``) shows as a slope ratio well above 1 with almost no state where ``H < 0``.
 """
 
 from __future__ import annotations
@@ -27,7 +31,21 @@ import torch
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.hjr.networks import ValueFunction
 
-__all__ = ["PdeDiagnostics", "pde_diagnostics"]
+__all__ = [
+    "SLOPE_LIMIT",
+    "TRIVIAL_RATIO",
+    "PdeDiagnostics",
+    "learned_value",
+    "pde_diagnostics",
+    "unlearned_warning",
+]
+
+SLOPE_LIMIT = 1.0
+TRIVIAL_RATIO = 0.7
+"""A PDE residual at this share of ``V = l``'s or above: the network learned little (the
+shipped models that learned their game measure 0.20-0.43)."""
+"""A residual network steeper than its boundary (``slope_ratio``) is rippling, not a value: the
+shipped models that learned their game measure 0.12-0.28, the Panda pairs' first ones 1.4-2.8."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +59,8 @@ class PdeDiagnostics:
     must_fall_share: float  # share of states with H(x, ∇l) < 0
     mean_fall_at_horizon: float  # mean of l(x) − V(T, x) [m]
     p99_fall_at_horizon: float  # 99th percentile of l(x) − V(T, x) [m]
+    model_fall_share: float | None = None  # share of H(x, ∇W) < 0, W = l̂ + NN uncapped (bc)
+    slope_ratio: float | None = None  # mean ‖∇ₓNN‖₁ / mean ‖∇ₓl̂‖₁ (bc variants)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -76,6 +96,14 @@ def pde_diagnostics(
         trivial = h_l.clamp(max=0.0).abs().mean()
         at_horizon = value_function.value_torch(torch.full_like(tau, horizon), x)
         fall = (system.boundary(x) - at_horizon).double().numpy()
+    model_fall = slope = None
+    if network.variant in ("bc", "bc+sym"):
+        with torch.enable_grad():
+            xn = x.clone().requires_grad_(True)
+            (dn_dx,) = torch.autograd.grad(network.siren(network.network_input(tau, xn)).sum(), xn)
+        with torch.no_grad():
+            model_fall = float((system.hamiltonian(x, dl_dx + dn_dx) < 0.0).double().mean())
+            slope = float(dn_dx.abs().sum(dim=1).mean() / dl_dx.abs().sum(dim=1).mean())
     trivial_value = float(trivial)
     return PdeDiagnostics(
         samples=samples,
@@ -85,4 +113,32 @@ def pde_diagnostics(
         must_fall_share=float((h_l < 0.0).double().mean()),
         mean_fall_at_horizon=float(np.mean(fall)),
         p99_fall_at_horizon=float(np.percentile(fall, 99)),
+        model_fall_share=model_fall,
+        slope_ratio=slope,
+    )
+
+
+def learned_value(d: PdeDiagnostics) -> bool:
+    """Whether ``d`` reads as a learned value: a PDE residual clearly below ``V = l``'s
+    (:data:`TRIVIAL_RATIO`) and, for the ``bc`` variants, no steeper than its boundary
+    (:data:`SLOPE_LIMIT`) with ``H(x, ∇W) < 0`` on at least half the states where
+    ``H(x, ∇l) < 0``."""
+    if d.residual_ratio >= TRIVIAL_RATIO:
+        return False
+    if d.slope_ratio is None or d.model_fall_share is None:
+        return True
+    return d.slope_ratio < SLOPE_LIMIT and d.model_fall_share >= 0.5 * d.must_fall_share
+
+
+def unlearned_warning(game: str, pde: dict[str, Any]) -> str:
+    """The line a pair build prints for a value function that reads as no learned value
+    (``pde``: a :class:`PdeDiagnostics` as a dict)."""
+    slope, fall = pde.get("slope_ratio"), pde.get("model_fall_share")
+    return (
+        f"value function {game} learned little beyond its boundary (slope ratio "
+        f"{'-' if slope is None else f'{slope:.2f}'}, H < 0 on "
+        f"{'-' if fall is None else f'{fall:.2f}'} of states against "
+        f"{pde['must_fall_share']:.2f} for V = l, mean l - V(T) "
+        f"{pde['mean_fall_at_horizon']:.4f} m): its certificates hold, but its V is close to a "
+        "distance; train longer or with a larger --gradient-weight (docs/value-functions.md)"
     )

@@ -129,6 +129,7 @@ def loss_terms(
     """``{"loss", "dirichlet", "pde"}`` (scalars; ``loss`` carries the graph). ``dirichlet``
     and ``pde`` are mean absolute residuals whatever ``dirichlet_loss`` puts into ``loss``."""
     zero = tau.new_zeros(())
+    slope = zero  # mean ‖∇ₓNN‖₁ of the bc variants
     if pretraining:
         _, residual = network.forward_with_residual(tau, x)
         dirichlet = residual.abs().mean()
@@ -152,6 +153,7 @@ def loss_terms(
             residual = nn_out
             dw_dtau, dw_dx = dn_dtau, dl_dx + dn_dx
         w = lhat + residual
+        slope = dn_dx.abs().sum(dim=1).mean()
     hamiltonian = network.system.hamiltonian(x, dw_dx)
     pde = (dw_dtau - hamiltonian.clamp(max=0.0)).abs().mean()
     if bool(boundary_mask.any()):
@@ -160,6 +162,8 @@ def loss_terms(
     else:
         dirichlet = penalty = zero
     loss = settings.dirichlet_weight * penalty + settings.pde_weight * pde
+    if settings.gradient_weight > 0:
+        loss = loss + settings.gradient_weight * slope
     return {"loss": loss, "dirichlet": dirichlet, "pde": pde}
 
 

@@ -56,6 +56,10 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lr-schedule", help=f"one of {list(LR_SCHEDULES)}")
     parser.add_argument("--lr-final", type=float, help="last rate as a share of --lr")
     parser.add_argument("--dirichlet-loss", help=f"one of {list(DIRICHLET_LOSSES)}")
+    parser.add_argument("--omega0", type=float, help="SIREN first-layer frequency")
+    parser.add_argument(
+        "--gradient-weight", type=float, help="weight of mean ‖∇ₓNN‖₁ in the loss (bc variants)"
+    )
     parser.add_argument("--checkpoint-every", default=None, help="samples between checkpoints")
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     parser.add_argument(
@@ -79,6 +83,8 @@ _OPTIONS = {
     "lr_schedule": "--lr-schedule",
     "lr_final_fraction": "--lr-final",
     "dirichlet_loss": "--dirichlet-loss",
+    "gradient_weight": "--gradient-weight",
+    "omega0": "--omega0",
     "checkpoint_every": "--checkpoint-every",
 }
 """``TrainSettings`` fields set from the command line, and their options (for error messages)."""
@@ -98,6 +104,8 @@ def _settings_from_args(args: argparse.Namespace) -> TrainSettings:
         net = replace(net, width=args.width)
     if args.hidden_layers is not None:
         net = replace(net, hidden_layers=args.hidden_layers)
+    if args.omega0 is not None:
+        net = replace(net, omega0=args.omega0)
     overrides: dict[str, Any] = {
         "variant": args.variant,
         "network": net,
@@ -114,6 +122,8 @@ def _settings_from_args(args: argparse.Namespace) -> TrainSettings:
         overrides["lr_final_fraction"] = args.lr_final
     if args.dirichlet_loss is not None:
         overrides["dirichlet_loss"] = args.dirichlet_loss
+    if args.gradient_weight is not None:
+        overrides["gradient_weight"] = args.gradient_weight
     if args.checkpoint_every is not None:
         overrides["checkpoint_every"] = parse_count(args.checkpoint_every, "checkpoint_every")
     return replace(base, **overrides)

@@ -36,6 +36,14 @@ class TrainSettings:
     (``V = l``, see :mod:`nehmo_core.hjr.diagnostics`): the absolute value's constant slope at
     zero pins the residual network there, at any weight we tried. The square's slope vanishes
     at zero, so small boundary errors cost little and the PDE term can shape the network.
+
+    ``gradient_weight``: the L1 Hamiltonian ``ū‖∇_{q¹}W‖₁ − d̄‖∇_{q²}W‖₁`` rewards any gradient
+    in the own joints, so a residual network can meet the PDE without learning the value: sine
+    ripples of a few millimetres with steep own-joint slopes make ``H ≥ 0`` almost everywhere, and
+    ``∂W/∂τ = 0`` then has no residual. The Panda pairs' first value networks did exactly that
+    (``‖∇_{q¹}NN‖₁`` ten times the boundary's, ``V(T) = l``). The term ``gradient_weight·mean
+    ‖∇ₓNN‖₁`` makes such slopes cost more than they save (:mod:`nehmo_core.hjr.diagnostics`
+    measures both).
     """
 
     variant: str = "bc+sym"
@@ -51,6 +59,9 @@ class TrainSettings:
     dirichlet_weight: float = 40.0
     dirichlet_loss: str = "l1"  # one of DIRICHLET_LOSSES
     pde_weight: float = 1.0
+    # weight of mean ‖∇ₓ NN‖₁ (bc variants): keeps the residual network from meeting the PDE with
+    # ripples instead of a value (see the class docstring)
+    gradient_weight: float = 0.0
     seed: int = 0
     checkpoint_every: int = 2_000_000  # [samples]
     log_every: int = 10  # [steps]
@@ -76,7 +87,7 @@ class TrainSettings:
             raise InvalidValueError(
                 "lr_final_fraction", "must lie in (0, 1]", self.lr_final_fraction
             )
-        for name in ("dirichlet_weight", "pde_weight"):
+        for name in ("dirichlet_weight", "pde_weight", "gradient_weight"):
             if not getattr(self, name) >= 0:
                 raise InvalidValueError(name, "must be >= 0", getattr(self, name))
 

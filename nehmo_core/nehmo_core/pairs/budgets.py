@@ -25,6 +25,7 @@ class Budget:
     falsify_samples: int
     mirror_samples: int
     reach_samples: int
+    visit_episodes: int  # planner episodes per cell of the visit stage
 
 
 BUDGETS: dict[str, Budget] = {
@@ -43,6 +44,7 @@ BUDGETS: dict[str, Budget] = {
         falsify_samples=3000,
         mirror_samples=2000,
         reach_samples=4000,
+        visit_episodes=30,
     ),
     # The pipeline end to end in minutes (tests, trying a robot): models too small to plan with.
     "tiny": Budget(
@@ -60,5 +62,6 @@ BUDGETS: dict[str, Budget] = {
         falsify_samples=40,
         mirror_samples=100,
         reach_samples=200,
+        visit_episodes=1,
     ),
 }

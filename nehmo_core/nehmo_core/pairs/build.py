@@ -17,7 +17,10 @@ folder that remembers what is done (run it again and it goes on where it stopped
    recorded in the model card.
 8. ``falsify:<game>``: states the planner would call safe (``V(t_safe) ≥ ε``) rolled out against
    every adversary on the exact geometry: the contact rate and its bound.
-9. ``card``: the pair card ``<pair>.card.json``: every command, seed, wall time and figure.
+9. ``visit``: the planner with these models on three two-arm cells of the pair (:mod:`.visit`).
+10. ``certify-visited:<game>``: ``nehmo verify`` over the pair states of those episodes, recorded
+    in the model card too (the planner keeps the larger level).
+11. ``card``: the pair card ``<pair>.card.json``: every command, seed, wall time and figure.
 
 The model folder is where the pair's files go (``--models``, default the first folder of
 ``NEHMO_MODELS``); NeHMO finds the pair there when that folder is in ``NEHMO_MODELS``.
@@ -43,6 +46,8 @@ from tqdm import tqdm
 
 from nehmo_core.cluster import parse_cluster
 from nehmo_core.errors import InvalidValueError, NehmoError
+from nehmo_core.hjr.diagnostics import unlearned_warning
+from nehmo_core.pairs import visit
 from nehmo_core.pairs.budgets import BUDGETS
 from nehmo_core.pairs.check import judge_mirror, pair_names, robot_figures, write_manifest
 from nehmo_core.pairs.probes import RESULT
@@ -163,6 +168,9 @@ class PairBuild:
         for game in self.names:
             out.append((f"certify:{game}", functools.partial(self._certify, game)))
             out.append((f"falsify:{game}", functools.partial(self._falsify, game)))
+        out.append(("visit", self._visit))
+        for game in self.names:
+            out.append((f"certify-visited:{game}", functools.partial(self._certify, game, True)))
         out.append(("card", self._card))
         return out
 
@@ -201,7 +209,7 @@ class PairBuild:
         env["OMP_NUM_THREADS"] = str(self.threads)
         return env
 
-    def _nehmo(self, stage: str, args: list[str]) -> str:
+    def nehmo(self, stage: str, args: list[str]) -> str:
         """Run ``nehmo ARGS`` in a fresh process (the pair registered through the model folder);
         its output goes to ``work/logs/<stage>.log``; returns the command as typed."""
         command = "nehmo " + shlex.join(args)
@@ -292,7 +300,7 @@ class PairBuild:
                 continue
             tmp = data / f"{name}.partial.npz"
             commands.append(
-                self._nehmo(
+                self.nehmo(
                     "labels",
                     [
                         *f"distance generate --pair {self.pair} --uniform {uniform} "
@@ -308,7 +316,7 @@ class PairBuild:
 
     def _distance(self) -> StageRecord:
         data = self.work / "data"
-        command = self._nehmo(
+        command = self.nehmo(
             "distance",
             [
                 "distance", "train", "--pair", self.pair, "--data", str(data / "train.npz"),
@@ -320,7 +328,7 @@ class PairBuild:
 
     def _calibrate(self) -> StageRecord:
         data = self.work / "data"
-        command = self._nehmo(
+        command = self.nehmo(
             "calibrate",
             [
                 "distance", "calibrate", "--pair", self.pair, "--data", str(data / "calib.npz"),
@@ -365,7 +373,7 @@ class PairBuild:
         ]  # fmt: skip
         if (run / "checkpoint.safetensors").exists() and not (run / "model.safetensors").exists():
             args.append("--resume")
-        command = self._nehmo(f"value:{game}", args)
+        command = self.nehmo(f"value:{game}", args)
         target = self.models / f"value_{game}_{self.slug}"
         meta = json.loads((run / "model.json").read_text())
         meta.setdefault("card", {}).update(
@@ -390,28 +398,15 @@ class PairBuild:
             "train_wall_time_s": meta.get("wall_seconds"),
             "below_boundary": check,
         }
+        if not check["learned"]:
+            tqdm.write(f"  warning: {unlearned_warning(game, check['pde'])}", file=sys.stderr)
         return StageRecord([command], figures)
 
-    def _certify(self, game: str) -> StageRecord:
-        from nehmo_core.planning.settings import PlannerSettings
+    def _visit(self) -> StageRecord:
+        return StageRecord(*visit.visit_stage(self))
 
-        tau = PlannerSettings().opt.t_safe
-        out = self.work / "certificates"
-        command = self._nehmo(
-            f"certify:{game}",
-            [
-                "verify", "--model", game, "--variant", self.variant,
-                "--tau", f"{tau:g}", "--distribution", "uniform",
-                "--samples", str(self.budget.certificate_samples),
-                "--alpha", str(self.budget.alpha),
-                "--search-samples", str(self.budget.search_samples),
-                "--seed", str(self.seed), "--out", str(out), "--card", *self.cluster_args,
-            ],
-        )  # fmt: skip
-        meta = json.loads((self.models / f"value_{game}_{self.slug}.json").read_text())
-        certs = [c for c in meta["card"].get("certificates", []) if abs(c["tau"] - tau) < 1e-9]
-        keep = ("delta", "violations", "samples", "epsilon", "certified", "accepted_share")
-        return StageRecord([command], {"tau": tau, **{k: certs[-1][k] for k in keep}})
+    def _certify(self, game: str, visited: bool = False) -> StageRecord:
+        return StageRecord(*visit.certify_stage(self, game, visited))
 
     def _falsify(self, game: str) -> StageRecord:
         args = [
@@ -424,6 +419,10 @@ class PairBuild:
 
     def _card(self) -> StageRecord:
         stages = {k: v for k, v in self.state["stages"].items()}
+        checks = {k[6:]: v["figures"]["below_boundary"] for k, v in stages.items() if "value:" in k}
+        unlearned = [
+            unlearned_warning(g, c["pde"]) for g, c in checks.items() if not c.get("learned", 1)
+        ]
         card = {
             "what": (
                 f"pose-conditioned pair models of {self.robots[0]} and {self.robots[1]}: learned "
@@ -440,6 +439,7 @@ class PairBuild:
             "wall_time_s": {k: v["wall_time_s"] for k, v in stages.items()},
             "total_wall_time_s": sum(v["wall_time_s"] for v in stages.values()),
             "stages": stages,
+            "warnings": unlearned,
         }
         path = self.models / f"{self.pair}.card.json"
         path.write_text(json.dumps(card, indent=2) + "\n")

@@ -93,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
     )
     card = build.run()
     print(f"{pair}: models and card in {build.models} ({card.name})")
+    for warning in json.loads(card.read_text()).get("warnings", []):
+        print(f"warning: {warning}")
     if str(build.models) not in registry.model_dirs_env():
         print(f"plan with them: export {registry.MODELS_ENV}={build.models}")
     return 0

@@ -137,10 +137,13 @@ def value_check(game: str, variant: str, samples: int, seed: int) -> dict[str, A
     """An avoid value function never exceeds its boundary, ``V(τ, x) ≤ l(x)``: the share of
     uniform states where the network's ``V(T)`` does by more than 1 cm (a fit error; the
     hand-trained models keep it under 3 %; a built pair's models are evaluated with the excess
-    capped, see ``ValueNetwork.cap_residual``), and the 99th percentile of the excess [m]."""
+    capped, see ``ValueNetwork.cap_residual``), and the 99th percentile of the excess [m]. Also
+    the network against its PDE (:func:`~nehmo_core.hjr.diagnostics.pde_diagnostics`) and whether
+    that reads as a learned value (``learned``)."""
     import torch
 
     from nehmo_core.hjr import load_value_function
+    from nehmo_core.hjr.diagnostics import learned_value, pde_diagnostics
 
     value = load_value_function(game, variant=variant)
     value.network.cap_residual = False  # the network's own fit, before any cap
@@ -149,11 +152,14 @@ def value_check(game: str, variant: str, samples: int, seed: int) -> dict[str, A
     with torch.no_grad():
         lx = system.boundary(torch.as_tensor(x, dtype=torch.float32)).numpy()
     excess = value.value(np.full(samples, system.horizon), x) - lx
+    pde = pde_diagnostics(value, samples, seed)
     return {
         "states": samples,
         "share_above_boundary_1cm": float((excess > 0.01).mean()),
         "p99_excess_m": float(np.percentile(excess, 99)),
         "seed": seed,
+        "pde": pde.to_dict(),
+        "learned": learned_value(pde),
     }
 
 
