@@ -11,7 +11,9 @@ for dual_ur5, five_ur5 and ur5_kinova_challenging, 20 episodes each) and, for th
 for ``ur5_kinova_any`` / ``kinova_ur5_any``, the ``nehmo`` episodes of the UR5-Kinova cell planned
 with them alone (``ur5_kinova_any``: ``nehmo evaluate --setup ur5_kinova_challenging --planners
 nehmo --seed 0 --value-model ur5_kinova_any --value-model kinova_ur5_any``, the Table IV comparison
-of ``bench/results/any_layout_ur5_kinova.md``).
+of ``bench/results/any_layout_ur5_kinova.md``); for the Panda pairs (``bc``: the Panda has no
+mirror map; the planner's models, so also at the settled horizon), the ``nehmo`` episodes of
+``dual_panda``, ``ur5_panda`` and ``mixed_four`` on seed 31 (30 each).
 Writes one JSON + Markdown per certificate under ``bench/results/certificates/`` and a table
 ``certificates.md``; ``--missing`` skips certificates whose JSON is already there (a resumed run).
 
@@ -42,7 +44,11 @@ MODELS = [  # (pair, variant, episode setups whose logs hold its pair states)
     ("ur5_ur5_any", "bc+sym", ("ha_tasks",)),
     ("ur5_kinova_any", "bc+sym", ("ur5_kinova_any",)),
     ("kinova_ur5_any", "bc+sym", ("ur5_kinova_any",)),
+    ("panda_panda_any", "bc", ("dual_panda", "mixed_four")),
+    ("ur5_panda_any", "bc", ("ur5_panda", "mixed_four")),
+    ("panda_ur5_any", "bc", ("ur5_panda", "mixed_four")),
 ]
+PLANNER_BC = {"panda_panda_any", "ur5_panda_any", "panda_ur5_any"}  # bc: no mirror map
 TAUS = (0.3, 0.1)
 _DEFAULTS = PlannerSettings()
 SLOW_TAU = round(_DEFAULTS.hold.bound * _DEFAULTS.opt.t_safe, 6)  # a settled peer's rows [s]
@@ -65,7 +71,7 @@ def main() -> int:
             for pair, variant, setups in MODELS:
                 if only and f"{pair}/{variant}" not in only:
                     continue
-                if tau == SLOW_TAU and variant != "bc+sym":
+                if tau == SLOW_TAU and variant != "bc+sym" and pair not in PLANNER_BC:
                     continue
                 logs = [a for s in setups for a in ("--logs", str(args.episodes_dir / s))]
                 for dist in ("visited", "uniform"):

@@ -89,11 +89,32 @@ def main() -> int:
                     f"states (p99 excess {_mm(b['p99_excess_m'])} mm); the planner evaluates "
                     "it capped at l."
                 )
-            if name.startswith("certify:"):
+                if "pde" in b:
+                    d = b["pde"]
+                    lines.append(
+                        f"- `{name[6:]}` against its PDE: residual {d['residual_ratio']:.2f} of "
+                        f"V = l's, slope ratio {d['slope_ratio']:.2f}, H < 0 on "
+                        f"{100 * d['model_fall_share']:.0f} % of states (V = l: "
+                        f"{100 * d['must_fall_share']:.0f} %), mean l − V(T) "
+                        f"{_mm(d['mean_fall_at_horizon'])} mm: "
+                        + ("a learned value." if b["learned"] else "**learned little**.")
+                    )
+            if name.startswith(("certify:", "certify-visited:")):
                 lines.append(
-                    f"- `{name[8:]}` value certificate at τ = {f['tau']} s (uniform, N = "
+                    f"- `{name.split(':')[1]}` value certificate at τ = {f['tau']} s "
+                    f"({f.get('distribution', 'uniform')}, N = "
                     f"{f['samples']}): δ = {_mm(f['delta'])} mm, {f['violations']} violations, "
                     f"ε ≤ {100 * f['epsilon']:.2f} %, certified: {f['certified']}."
+                )
+            if name == "visit":
+                lines.append(
+                    "- Visit cells (the planner with these models; SR % / collisions): "
+                    + "; ".join(
+                        f"{c['base_distance_m']} m, yaw {c['yaw_rad']:.2f}: {c['sr']:.0f} / "
+                        f"{c['collisions']} of {c['episodes']}"
+                        for c in f["cells"]
+                    )
+                    + "."
                 )
             if name.startswith("falsify:"):
                 lines.append(

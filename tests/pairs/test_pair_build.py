@@ -86,7 +86,8 @@ def test_the_pipeline_writes_models_manifest_and_a_card_of_every_stage(built) ->
     # every command ran is recorded as typed
     commands = [c for s in stages.values() for c in s["commands"]]
     assert any(c.startswith(f"nehmo distance generate --pair {PAIR}") for c in commands)
-    assert any(c.startswith(f"nehmo train --system {PAIR} --variant bc+sym") for c in commands)
+    trained = [c for c in commands if c.startswith(f"nehmo train --system {PAIR} --variant bc+sym")]
+    assert len(trained) == 1 and "--gradient-weight 1" in trained[0]
     assert any(c.startswith(f"nehmo verify --model {PAIR}") for c in commands)
     # the value stage measures the network against its PDE; a tiny budget's network is told
     # apart from a learned value, and the card says so in its warnings

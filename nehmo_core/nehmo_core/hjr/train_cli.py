@@ -58,7 +58,9 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dirichlet-loss", help=f"one of {list(DIRICHLET_LOSSES)}")
     parser.add_argument("--omega0", type=float, help="SIREN first-layer frequency")
     parser.add_argument(
-        "--gradient-weight", type=float, help="weight of mean ‖∇ₓNN‖₁ in the loss (bc variants)"
+        "--gradient-weight",
+        type=float,
+        help="weight of the residual network's slope beyond the boundary's (bc variants)",
     )
     parser.add_argument("--checkpoint-every", default=None, help="samples between checkpoints")
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")

@@ -42,8 +42,9 @@ class TrainSettings:
     ripples of a few millimetres with steep own-joint slopes make ``H ≥ 0`` almost everywhere, and
     ``∂W/∂τ = 0`` then has no residual. The Panda pairs' first value networks did exactly that
     (``‖∇_{q¹}NN‖₁`` ten times the boundary's, ``V(T) = l``). The term ``gradient_weight·mean
-    ‖∇ₓNN‖₁`` makes such slopes cost more than they save (:mod:`nehmo_core.hjr.diagnostics`
-    measures both).
+    max(0, ‖∇ₓNN‖₁ − ‖∇ₓl̂‖₁)`` makes such slopes cost more than they save and leaves a value's
+    own slope free (an L1 penalty on all of it held the Panda network at ``NN = 0``, as the L1
+    Dirichlet term does); :mod:`nehmo_core.hjr.diagnostics` measures both.
     """
 
     variant: str = "bc+sym"
@@ -59,8 +60,8 @@ class TrainSettings:
     dirichlet_weight: float = 40.0
     dirichlet_loss: str = "l1"  # one of DIRICHLET_LOSSES
     pde_weight: float = 1.0
-    # weight of mean ‖∇ₓ NN‖₁ (bc variants): keeps the residual network from meeting the PDE with
-    # ripples instead of a value (see the class docstring)
+    # weight of the mean excess of ‖∇ₓNN‖₁ over ‖∇ₓl̂‖₁ (bc variants): keeps the residual network
+    # from meeting the PDE with ripples instead of a value (see the class docstring)
     gradient_weight: float = 0.0
     seed: int = 0
     checkpoint_every: int = 2_000_000  # [samples]

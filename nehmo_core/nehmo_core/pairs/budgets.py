@@ -19,6 +19,7 @@ class Budget:
     epochs: int
     value_samples: str
     value_preset: str
+    value_gradient_weight: float  # ``nehmo train --gradient-weight``: no ripples for a value
     certificate_samples: int
     alpha: float  # the certificates' target violation probability (β = 1e-3)
     search_samples: int
@@ -36,8 +37,10 @@ BUDGETS: dict[str, Budget] = {
         calibration=80_000,
         hidden="256,256,256",
         epochs=40,
-        value_samples="40M",
+        # 40M samples gamed the Hamiltonian (docs/value-functions.md, "Ripples"); 10M learned it
+        value_samples="10M",
         value_preset="cpu_12d",
+        value_gradient_weight=1.0,
         certificate_samples=3000,
         alpha=0.01,
         search_samples=500,
@@ -56,6 +59,7 @@ BUDGETS: dict[str, Budget] = {
         epochs=1,
         value_samples="20k",
         value_preset="cpu",
+        value_gradient_weight=1.0,
         certificate_samples=60,
         alpha=0.2,
         search_samples=30,

@@ -12,14 +12,14 @@ folder that remembers what is done (run it again and it goes on where it stopped
 4. ``calibrate``: kept unbiased (``nehmo distance calibrate --unbiased``): no offset.
 5. ``distance-certificate``: the learned distance on exact contact states (α, β).
 6. ``value:<game>``: the conditioned ``bc+sym`` value function of each side (one for a pair of
-   the same robot; both games ``A_B_any`` and ``B_A_any`` otherwise), copied to the folder.
-7. ``certify:<game>``: ``nehmo verify`` over uniform states at the planner's ``t_safe``,
-   recorded in the model card.
+   the same robot; both games ``A_B_any`` and ``B_A_any`` otherwise), copied to the folder, and
+   measured against its PDE (a warning in the card if it learned little).
+7. ``certify:<game>``: ``nehmo verify`` over uniform states at the planner's ``t_safe``.
 8. ``falsify:<game>``: states the planner would call safe (``V(t_safe) ≥ ε``) rolled out against
    every adversary on the exact geometry: the contact rate and its bound.
 9. ``visit``: the planner with these models on three two-arm cells of the pair (:mod:`.visit`).
-10. ``certify-visited:<game>``: ``nehmo verify`` over the pair states of those episodes, recorded
-    in the model card too (the planner keeps the larger level).
+10. ``certify-visited:<game>``: ``nehmo verify`` over the pair states of those episodes (the
+    planner keeps the larger of the two levels in the model card).
 11. ``card``: the pair card ``<pair>.card.json``: every command, seed, wall time and figure.
 
 The model folder is where the pair's files go (``--models``, default the first folder of
@@ -337,11 +337,8 @@ class PairBuild:
         )  # fmt: skip
         return StageRecord([command], self._distance_figures())
 
-    def _distance_card(self) -> Path:
-        return self.models / f"distance_{self.pair}.json"
-
     def _distance_figures(self) -> dict[str, Any]:
-        card = json.loads(self._distance_card().read_text())
+        card = json.loads((self.models / f"distance_{self.pair}.json").read_text())
         acc = card.get("accuracy_held_out", {})
         keep = ("mae_m", "mae_near_m", "p95_err_near_m", "false_safe_rate", "n", "n_near")
         return {
@@ -357,7 +354,7 @@ class PairBuild:
             "--pool", str(self.work / "data" / "test.npz"),
         ]  # fmt: skip
         cert = self._python("distance certificate", args)
-        card_path = self._distance_card()
+        card_path = self.models / f"distance_{self.pair}.json"
         card = json.loads(card_path.read_text())
         card["certificates"] = [{**cert, "command": "nehmo pair build (distance-certificate)"}]
         card_path.write_text(json.dumps(card, indent=1) + "\n")
@@ -370,10 +367,12 @@ class PairBuild:
             "--preset", self.budget.value_preset,
             "--samples", self.budget.value_samples, "--seed", str(self.seed),
             "--threads", str(self.threads), "--device", self.device, "--out", str(run),
+            "--gradient-weight", f"{self.budget.value_gradient_weight:g}",
         ]  # fmt: skip
         if (run / "checkpoint.safetensors").exists() and not (run / "model.safetensors").exists():
             args.append("--resume")
-        command = self.nehmo(f"value:{game}", args)
+        done = (run / "model.safetensors").exists()  # trained before the stage was recorded
+        command = "nehmo " + shlex.join(args) if done else self.nehmo(f"value:{game}", args)
         target = self.models / f"value_{game}_{self.slug}"
         meta = json.loads((run / "model.json").read_text())
         meta.setdefault("card", {}).update(

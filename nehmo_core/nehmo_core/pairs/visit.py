@@ -45,6 +45,9 @@ LAYOUTS: tuple[tuple[float, float], ...] = (
 )
 """(base distance as a share of the two arms' mean reach, yaw of the second arm [rad])."""
 SEED_OFFSET = 5005
+CERTIFY_ATTEMPTS = 8
+"""``nehmo verify --attempts`` of a build's certificates: levels tried 1 cm apart above the searched
+one (β split among them); three left the rebuilt Panda pair 0.15 points above α = 1 %."""
 
 
 def visit_cells(
@@ -139,6 +142,7 @@ def certify_stage(build: PairBuild, game: str, visited: bool) -> Stage:
             "--samples", str(build.budget.certificate_samples),
             "--alpha", str(build.budget.alpha),
             "--search-samples", str(build.budget.search_samples),
+            "--attempts", str(CERTIFY_ATTEMPTS),
             "--seed", str(build.seed), "--out", str(build.work / "certificates"), "--card",
             *build.cluster_args,
         ],

@@ -20,6 +20,7 @@ from nehmo_core.planning.settings.groups import (
     OptSettings,
     SolverSettings,
 )
+from nehmo_core.planning.settings.limits import JointLimitSettings
 from nehmo_core.planning.settings.spec import Rule
 from nehmo_core.planning.settings.stage_groups import (
     ActuatorSettings,
@@ -43,6 +44,7 @@ PAPER_OPT: Mapping[str, Any] = types.MappingProxyType(
         "silent_watch.lookahead": 0.0,
         "self_clearance.enabled": False,
         "escape.enabled": False,
+        "joint_limits.enabled": False,
     }
 )
 """What the paper's Opt leaves out of NeHMO's defaults (the ``paper`` preset, ``nehmo_paper``):
@@ -125,6 +127,7 @@ class PlannerSettings:
     silent_watch: SilentWatchSettings = field(default_factory=SilentWatchSettings)
     self_clearance: SelfClearanceSettings = field(default_factory=SelfClearanceSettings)
     escape: EscapeSettings = field(default_factory=EscapeSettings)
+    joint_limits: JointLimitSettings = field(default_factory=JointLimitSettings)
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -21,6 +21,8 @@ stage (settings group)   kind                what it changes; what it keeps
 ``contact``              command filter      within a few cm of a peer's real geometry: no step
 (:mod:`.contact_guard`)                      closes the gap; a blocked one turns up the real
                                              distance (only where the V rows are broken)
+``joint_limits``         command filter      no joint driven past its limit (first filter: the
+(:mod:`.joint_limits`)                       others check the step the arm takes); V rows stay
 =======================  ==================  ===================================================
 
 :func:`build_stages` makes the stages a planner's settings switch on.
@@ -43,6 +45,7 @@ from nehmo_core.planning.opt.pipeline import (
 from nehmo_core.planning.stages.accel_limits import AccelLimits
 from nehmo_core.planning.stages.contact_guard import ContactGuard
 from nehmo_core.planning.stages.exact_guard import ExactGuard
+from nehmo_core.planning.stages.joint_limits import JointLimits
 from nehmo_core.planning.stages.self_clearance import SelfClearance
 from nehmo_core.planning.stages.silent_peers import SilentPeers
 from nehmo_core.planning.stages.speed_bounds import HoldAnnouncer
@@ -89,6 +92,8 @@ def build_stages(host: Host) -> Staged:
     if accel is not None:
         rows.append(accel)
     filters: list[CommandFilter] = []
+    if s.joint_limits.enabled:  # first: every later filter checks the step the arm takes
+        filters.append(JointLimits(host))
     if s.exact_guard.gap > 0.0:
         filters.append(ExactGuard(host))
     if s.contact.clearance > 0.0:  # it sees the command every stage before it shaped
