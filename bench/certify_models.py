@@ -12,8 +12,9 @@ for ``ur5_kinova_any`` / ``kinova_ur5_any``, the ``nehmo`` episodes of the UR5-K
 with them alone (``ur5_kinova_any``: ``nehmo evaluate --setup ur5_kinova_challenging --planners
 nehmo --seed 0 --value-model ur5_kinova_any --value-model kinova_ur5_any``, the Table IV comparison
 of ``bench/results/any_layout_ur5_kinova.md``); for the Panda pairs (``bc``: the Panda has no
-mirror map; the planner's models, so also at the settled horizon), the ``nehmo`` episodes of
-``dual_panda``, ``ur5_panda`` and ``mixed_four`` on seed 31 (30 each).
+mirror map; the planner's models, so also at the settled horizon), the episodes of their build's
+visit stage (``--episodes-dir runs/pairs/<pair>``: ``visit/visit_*``, made by ``nehmo pair
+build``, which also certifies them at ``t_safe``; run with ``--only`` per pair).
 Writes one JSON + Markdown per certificate under ``bench/results/certificates/`` and a table
 ``certificates.md``; ``--missing`` skips certificates whose JSON is already there (a resumed run).
 
@@ -44,9 +45,9 @@ MODELS = [  # (pair, variant, episode setups whose logs hold its pair states)
     ("ur5_ur5_any", "bc+sym", ("ha_tasks",)),
     ("ur5_kinova_any", "bc+sym", ("ur5_kinova_any",)),
     ("kinova_ur5_any", "bc+sym", ("ur5_kinova_any",)),
-    ("panda_panda_any", "bc", ("dual_panda", "mixed_four")),
-    ("ur5_panda_any", "bc", ("ur5_panda", "mixed_four")),
-    ("panda_ur5_any", "bc", ("ur5_panda", "mixed_four")),
+    ("panda_panda_any", "bc", ("visit",)),
+    ("ur5_panda_any", "bc", ("visit",)),
+    ("panda_ur5_any", "bc", ("visit",)),
 ]
 PLANNER_BC = {"panda_panda_any", "ur5_panda_any", "panda_ur5_any"}  # bc: no mirror map
 TAUS = (0.3, 0.1)
@@ -98,8 +99,9 @@ def main() -> int:
         "# Certificates of the shipped value functions\n\n"
         "α = 1 %, β = 1e-3; made by `bench/certify_models.py`. Visited states: `nehmo` episodes "
         "of seed 31 (dual_ur5, five_ur5, ur5_kinova_challenging, 20 each); for `ur5_ur5_any`, "
-        "of Ha et al.'s 46 obstacle-free tasks. Wall times were measured with other jobs on "
-        "the second core.\n\n" + table
+        "of Ha et al.'s 46 obstacle-free tasks; for the Panda pairs, of their build's visit cells "
+        "(`nehmo pair build`). Wall times were measured with other jobs on the second core.\n\n"
+        + table
     )
     print(table)
     return 0

@@ -14,7 +14,7 @@ from safetensors.torch import load_file
 
 from nehmo_core.errors import InvalidValueError, ModelFileError, UnknownNameError
 from nehmo_core.hjr.model_files import load_value_function
-from nehmo_core.hjr.networks import NetworkSettings
+from nehmo_core.hjr.networks import NetworkSettings, ValueNetwork
 from nehmo_core.hjr.systems import Air3D, TwoLinkPair
 from nehmo_core.hjr.train import draw_batch, loss_terms, train
 from nehmo_core.hjr.train_cli import main, parse_count
@@ -173,22 +173,27 @@ def test_cli_errors_list_valid_choices(tmp_path: Path, capsys: pytest.CaptureFix
     assert load_value_function(tmp_path / "y").variant == "deepreach"
 
 
-@pytest.mark.parametrize("variant", ["bc", "bc+sym", "exact"])
-def test_fast_pde_loss_equals_full_autograd(variant: str) -> None:
-    """The PDE term with a detached boundary gradient equals autograd through V = l̂ + NN."""
-    from nehmo_core.hjr.networks import ValueNetwork
-
+def _net_and_batch(
+    variant: str, net_seed: int, batch_seed: int
+) -> tuple[TwoLinkPair, ValueNetwork, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """A small two-link value network and a batch ``(τ, x, boundary mask)`` of 256 states."""
     system = TwoLinkPair()
     net = ValueNetwork(
         system,
         variant,
         NetworkSettings(width=32, hidden_layers=1),
-        generator=torch.Generator().manual_seed(1),
+        generator=torch.Generator().manual_seed(net_seed),
     )
-    gen = torch.Generator().manual_seed(3)
+    gen = torch.Generator().manual_seed(batch_seed)
     x = system.sample_states(256, gen)
     tau = torch.rand(256, generator=gen) * system.horizon
-    mask = torch.arange(256) >= 200
+    return system, net, tau, x, torch.arange(256) >= 200
+
+
+@pytest.mark.parametrize("variant", ["bc", "bc+sym", "exact"])
+def test_fast_pde_loss_equals_full_autograd(variant: str) -> None:
+    """The PDE term with a detached boundary gradient equals autograd through V = l̂ + NN."""
+    system, net, tau, x, mask = _net_and_batch(variant, 1, 3)
     settings = TrainSettings(variant=variant)
     fast = loss_terms(net, settings, tau, x, mask, pretraining=False)
     t = tau.clone().requires_grad_(True)
@@ -204,19 +209,7 @@ def test_fast_pde_loss_equals_full_autograd(variant: str) -> None:
 def test_squared_dirichlet_term(pretraining: bool) -> None:
     """``dirichlet_loss="l2"`` puts the mean squared boundary residual into the loss; the logged
     ``dirichlet`` stays the mean absolute residual, so runs of either kind compare."""
-    from nehmo_core.hjr.networks import ValueNetwork
-
-    system = TwoLinkPair()
-    net = ValueNetwork(
-        system,
-        "bc",
-        NetworkSettings(width=32, hidden_layers=1),
-        generator=torch.Generator().manual_seed(2),
-    )
-    gen = torch.Generator().manual_seed(4)
-    x = system.sample_states(256, gen)
-    tau = torch.rand(256, generator=gen) * system.horizon
-    mask = torch.arange(256) >= 200
+    _, net, tau, x, mask = _net_and_batch("bc", 2, 4)
     l1 = TrainSettings(variant="bc", dirichlet_weight=40.0)
     l2 = replace(l1, dirichlet_loss="l2")
     a = loss_terms(net, l1, tau, x, mask, pretraining=pretraining)
@@ -234,19 +227,7 @@ def test_squared_dirichlet_term(pretraining: bool) -> None:
 def test_the_gradient_term_adds_the_residual_networks_mean_l1_slope(variant: str) -> None:
     """``gradient_weight`` adds ``weight·mean max(0, ‖∇ₓNN‖₁ − ‖∇ₓl̂‖₁)`` of the residual
     network (bc variants) to the loss and nothing else; DeepReach has no residual network."""
-    from nehmo_core.hjr.networks import ValueNetwork
-
-    system = TwoLinkPair()
-    net = ValueNetwork(
-        system,
-        variant,
-        NetworkSettings(width=32, hidden_layers=1),
-        generator=torch.Generator().manual_seed(5),
-    )
-    gen = torch.Generator().manual_seed(6)
-    x = system.sample_states(256, gen)
-    tau = torch.rand(256, generator=gen) * system.horizon
-    mask = torch.arange(256) >= 200
+    _, net, tau, x, mask = _net_and_batch(variant, 5, 6)
     plain = TrainSettings(variant=variant)
     steep = replace(plain, gradient_weight=0.5)
     a = loss_terms(net, plain, tau, x, mask, pretraining=False)

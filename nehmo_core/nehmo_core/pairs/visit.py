@@ -130,6 +130,7 @@ def certify_stage(build: PairBuild, game: str, visited: bool) -> Stage:
     """Stages ``certify:<game>`` (uniform states) and ``certify-visited:<game>`` (the visit
     stage's): ``nehmo verify`` at the planner's ``t_safe``, recorded in the model card."""
     from nehmo_core.planning.settings import PlannerSettings
+    from nehmo_core.verify.cards import certificate_actuators
 
     tau = PlannerSettings().opt.t_safe
     logs = sorted(str(p) for p in (build.work / "visit").glob("visit_*/logs"))
@@ -151,7 +152,9 @@ def certify_stage(build: PairBuild, game: str, visited: bool) -> Stage:
     certs = [
         c
         for c in meta["card"].get("certificates", [])
-        if abs(c["tau"] - tau) < 1e-9 and c["distribution"]["name"] == where[0]
+        if abs(c["tau"] - tau) < 1e-9
+        and c["distribution"]["name"] == where[0]
+        and certificate_actuators(c) == "ideal"  # not one made later under an actuator model
     ]
     keep = ("delta", "violations", "samples", "epsilon", "certified", "accepted_share")
     return [command], {"tau": tau, "distribution": where[0], **{k: certs[-1][k] for k in keep}}

@@ -68,7 +68,9 @@ def record_certificate(card_path: Path, cert: Certificate) -> None:
         [*kept, entry],
         key=lambda c: (c["tau"], c["distribution"]["name"], certificate_actuators(c)),
     )
-    card_path.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    tmp = card_path.with_name(card_path.name + ".tmp")  # readers never see half a card
+    tmp.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    tmp.replace(card_path)
 
 
 def certified_level(
