@@ -18,6 +18,7 @@ from nehmo_core.errors import UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.setups import SCENARIO_FILTERS, Setup
 from nehmo_core.planning.baselines.naive import NaivePlanner
+from nehmo_core.robots.loader import is_cell_file
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set
@@ -81,7 +82,7 @@ def scenario_set_for(
             made = generate_scenario_set(cell, seed, count, accept, max_candidates, meta, progress)
     else:
         raise UnknownNameError("scenario filter", setup.scenario_filter, SCENARIO_FILTERS)
-    if setup.cell.endswith((".yaml", ".yml")):  # a user's cell: its file, which loads anywhere
+    if is_cell_file(setup.cell):  # a user's cell: its file, which loads anywhere
         made = dataclasses.replace(made, cell=str(Path(setup.cell).resolve()))
     if path is not None:
         save_scenario_set(made, path)

@@ -23,6 +23,7 @@ from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.planning.factory import CENTRALIZED, DECENTRALIZED
 from nehmo_core.planning.models.registry import OPT_KINDS
 from nehmo_core.robots import Cell, load_cell
+from nehmo_core.robots.loader import is_cell_file
 
 __all__ = [
     "OPT_KINDS",
@@ -119,7 +120,7 @@ def get_setup(name: str) -> Setup:
     file's ``name``); raises listing the valid names."""
     if name in SETUPS:
         return SETUPS[name]
-    if name.endswith((".yaml", ".yml")):
+    if is_cell_file(name):
         cell = load_cell(name)
         return Setup(cell.name, name, USER_CELL_TIME_LIMIT, description=f"the cell of {name}")
     raise UnknownNameError("setup", name, [*SETUPS, "<a cell file>.yaml"])

@@ -168,7 +168,7 @@ class PairBuild:
         for game in self.names:
             out.append((f"certify:{game}", functools.partial(self._certify, game)))
             out.append((f"falsify:{game}", functools.partial(self._falsify, game)))
-        out.append(("visit", self._visit))
+        out.append(("visit", lambda: StageRecord(*visit.visit_stage(self))))
         for game in self.names:
             out.append((f"certify-visited:{game}", functools.partial(self._certify, game, True)))
         out.append(("card", self._card))
@@ -401,9 +401,6 @@ class PairBuild:
             tqdm.write(f"  warning: {unlearned_warning(game, check['pde'])}", file=sys.stderr)
         return StageRecord([command], figures)
 
-    def _visit(self) -> StageRecord:
-        return StageRecord(*visit.visit_stage(self))
-
     def _certify(self, game: str, visited: bool = False) -> StageRecord:
         return StageRecord(*visit.certify_stage(self, game, visited))
 
@@ -418,7 +415,9 @@ class PairBuild:
 
     def _card(self) -> StageRecord:
         stages = {k: v for k, v in self.state["stages"].items()}
-        checks = {k[6:]: v["figures"]["below_boundary"] for k, v in stages.items() if "value:" in k}
+        checks = {
+            k[6:]: v["figures"]["below_boundary"] for k, v in stages.items() if k[:6] == "value:"
+        }
         unlearned = [
             unlearned_warning(g, c["pde"]) for g, c in checks.items() if not c.get("learned", 1)
         ]

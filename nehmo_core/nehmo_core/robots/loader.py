@@ -49,7 +49,13 @@ def cell_names() -> tuple[str, ...]:
     return tuple(sorted(p.stem for p in CELLS_DIR.glob("*.yaml")))
 
 
-def _atomic_write(path: Path, text: str) -> None:
+def is_cell_file(ref: str | os.PathLike[str]) -> bool:
+    """Whether a cell reference names a YAML file (not a shipped cell)."""
+    return str(ref).endswith((".yaml", ".yml"))
+
+
+def atomic_write(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` so that a reader sees the old file or the new one, never half."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp") as fh:
         fh.write(text)
@@ -75,7 +81,7 @@ def _resolved_urdf(urdf: Path) -> Path:
     digest = hashlib.sha256(text.encode()).hexdigest()[:12]
     out = cache_dir() / "robots" / f"{urdf.stem.removesuffix('_robot')}_{digest}.urdf"
     if not out.exists():
-        _atomic_write(out, text)
+        atomic_write(out, text)
     return out
 
 
@@ -189,7 +195,7 @@ def load_cell(name_or_path: str | os.PathLike[str]) -> Cell:
     text = str(name_or_path)
     if text in cell_names():
         path = CELLS_DIR / f"{text}.yaml"
-    elif text.endswith((".yaml", ".yml")) or os.sep in text:
+    elif is_cell_file(text) or os.sep in text:
         path = Path(text)
         if not path.exists():
             raise ModelFileError(f"cell file not found: {path}")

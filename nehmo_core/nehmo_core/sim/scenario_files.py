@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from nehmo_core.errors import NehmoError
-from nehmo_core.robots.loader import load_cell
+from nehmo_core.robots.loader import is_cell_file, load_cell
 from nehmo_core.robots.model import Cell
 from nehmo_core.sim.scenarios import Scenario, ScenarioSet, generate_scenario_set
 
@@ -68,7 +68,7 @@ def draw_scenario_set(cell_ref: str, seed: int, count: int) -> ScenarioSet:
     the set (and a later re-run) must load.
     """
     scenarios = generate_scenario_set(load_cell(cell_ref), seed, count)
-    if str(cell_ref).endswith((".yaml", ".yml")):
+    if is_cell_file(cell_ref):
         scenarios = dataclasses.replace(scenarios, cell=str(Path(cell_ref).resolve()))
     return scenarios
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from nehmo_core.errors import InvalidValueError, NehmoError
+from nehmo_core.robots.loader import atomic_write
 from nehmo_core.robots.registry import model_file
 from nehmo_core.sim.actuators import certificate_actuators
 from nehmo_core.verify.certify import Certificate
@@ -68,9 +69,7 @@ def record_certificate(card_path: Path, cert: Certificate) -> None:
         [*kept, entry],
         key=lambda c: (c["tau"], c["distribution"]["name"], certificate_actuators(c)),
     )
-    tmp = card_path.with_name(card_path.name + ".tmp")  # readers never see half a card
-    tmp.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
-    tmp.replace(card_path)
+    atomic_write(card_path, json.dumps(meta, indent=2, sort_keys=True) + "\n")
 
 
 def certified_level(
