@@ -86,3 +86,25 @@ def test_the_stage_is_off_in_the_paper_preset() -> None:
     planner = _one_panda(PlannerSettings.preset("paper"))
     assert "joint_limits" not in {s.name for s in planner.stages}
     planner.close()
+
+
+def test_opt_gets_the_limits_as_rows() -> None:
+    """A joint within a step of its limit gets a row Opt keeps (so no step is clipped after
+    the solve, which the other rows did not see); standing still keeps every row."""
+    planner = _one_panda()
+    stage = planner.stage("joint_limits")
+    robot = planner.robot
+    q = np.clip(np.array([0.0, 0.0, 0.0, -1.5, 0.0, 1.5, 0.0]), robot.lower, robot.upper)
+    q[1] = robot.lower[1]  # joint 2 at its lower limit
+    q[3] = robot.upper[3] - 0.01  # joint 4 a centiradian below its upper one
+    rows = stage.rows(q)
+    assert rows.count == 2 and rows.satisfied(np.zeros(7))
+    step = planner.settings.opt.t_plan * planner.settings.opt.u_max
+    assert not rows.satisfied(np.eye(7)[3] * step)  # a full step past joint 4's limit
+    assert not rows.satisfied(-np.eye(7)[1] * 0.001)  # any step below joint 2's
+    goal = q + np.array([0.3, -0.3, 0.3, 0.3, 0.0, 0.0, 0.0])  # beyond both limits
+    u = planner.plan(q, {}, goal).velocity
+    y = planner.settings.opt.t_plan * u
+    assert y[1] >= -1e-9 and y[3] <= 0.01 + 1e-9
+    assert y[0] == pytest.approx(step)  # the free joints go at full speed
+    planner.close()

@@ -239,3 +239,50 @@ def test_pairs_skipped_by_their_bound_give_the_same_rows_as_asking_every_pair(
     finally:
         skipping.close()
         exact.close()
+
+
+# dual_panda seed 81, scenario 76: panda_1 2.45 rad from its goal, its hand 5.0 mm (the safety
+# distance) from link 2, 25 cm from its peer; its goal 1.2 cm clear of itself, the straight
+# joint path there at least 4.9 mm clear
+_RESTING = [
+    -0.510291135,
+    -0.869077967,
+    1.243926687,
+    -2.729714457,
+    0.04734492,
+    0.235777008,
+    0.134681717,
+]
+_RESTING_GOAL = [
+    -1.317256487,
+    -0.928288996,
+    1.983592259,
+    -2.881063728,
+    -2.100300735,
+    0.299822464,
+    0.545511224,
+]
+
+
+def test_an_arm_resting_at_the_safety_distance_can_leave_it() -> None:
+    """At ``d = safety`` a row allows no closing to first order and the distance's curvature
+    closes it by µm along the step: the exact check lets that reach ``slack`` below safety,
+    no further; without the slack it refused every step and the arm never moved again."""
+    from nehmo_core.planning.nehmo import NehmoPlanner
+
+    cell = Cell("one_panda", (ArmSpec("panda_0", load_robot("panda"), Pose()),))
+    q, goal = np.array(_RESTING), np.array(_RESTING_GOAL)
+    moved = {}
+    for slack in (0.001, 0.0):
+        settings = PlannerSettings().override({"self_clearance.slack": slack})
+        planner = NehmoPlanner(cell, "panda_0", [], settings)
+        stage = planner.stage("self_clearance")
+        assert isinstance(stage, SelfClearance)
+        assert min(stage.distances(q).values()) == pytest.approx(0.005, abs=1e-5)
+        u = planner.plan(q, {}, goal).velocity
+        end = stage.distances(q + settings.opt.tick * u)
+        assert min(end.values()) >= 0.005 - slack - 1e-6
+        moved[slack] = float(np.abs(u).max())
+        planner.close()
+    assert moved[0.001] == pytest.approx(0.5)  # full speed toward the goal
+    assert moved[0.0] == 0.0  # the old check: stuck for good

@@ -10,6 +10,7 @@ from nehmo_core.planning.settings.groups import (
     OptSettings,
     SolverSettings,
 )
+from nehmo_core.planning.settings.limits import SelfClearanceSettings
 from nehmo_core.planning.settings.planner import (
     PAPER_OPT,
     PRESETS,
@@ -23,7 +24,6 @@ from nehmo_core.planning.settings.stage_groups import (
     EscapeSettings,
     ExactGuardSettings,
     HoldSettings,
-    SelfClearanceSettings,
     SilentWatchSettings,
 )
 

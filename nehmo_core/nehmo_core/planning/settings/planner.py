@@ -20,7 +20,7 @@ from nehmo_core.planning.settings.groups import (
     OptSettings,
     SolverSettings,
 )
-from nehmo_core.planning.settings.limits import JointLimitSettings
+from nehmo_core.planning.settings.limits import JointLimitSettings, SelfClearanceSettings
 from nehmo_core.planning.settings.spec import Rule
 from nehmo_core.planning.settings.stage_groups import (
     ActuatorSettings,
@@ -28,7 +28,6 @@ from nehmo_core.planning.settings.stage_groups import (
     EscapeSettings,
     ExactGuardSettings,
     HoldSettings,
-    SelfClearanceSettings,
     SilentWatchSettings,
 )
 

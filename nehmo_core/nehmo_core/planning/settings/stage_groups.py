@@ -16,7 +16,6 @@ __all__ = [
     "EscapeSettings",
     "ExactGuardSettings",
     "HoldSettings",
-    "SelfClearanceSettings",
     "SilentWatchSettings",
 ]
 
@@ -220,54 +219,6 @@ class SilentWatchSettings:
 
     def __post_init__(self) -> None:
         check_group(self, "silent_watch")
-
-
-@dataclass(frozen=True)
-class SelfClearanceSettings:
-    """Self-collision velocity dampers (``planning/stages/self_clearance.py``): link pairs
-    closer than ``influence`` may close at most ``gain`` of their distance above ``safety`` per
-    planned step, in the step and in the fail-safe."""
-
-    enabled: bool = setting(
-        True, "self-collision rows in Opt and the fail-safe (false: the paper's Opt)"
-    )
-    influence: float = setting(0.10, "link pairs closer than this get a row", "m", gt=0)
-    safety: float = setting(0.005, "distance the rows keep between links", "m", ge=0)
-    gain: float = setting(
-        0.5, "share of the distance above safety a pair may close per step", gt=0, le=1
-    )
-    # a command runs from where the one in flight takes the arm (one tick after it was planned)
-    ahead: bool = setting(
-        True,
-        "rows at the pose the command in flight reaches in one opt.tick (false: the observed pose)",
-    )
-    # linear rows let a folded UR5 creep 0.5-1 mm a tick through the safety distance into a
-    # self-contact (a ridge of its wrist-upper arm distance in wrist 2; gen_7arm_s78_024)
-    check: float = setting(
-        0.02,
-        "pairs closer than this are checked at the step's end with the exact geometry: none "
-        "may end below min(now, safety) (0: off)",
-        "m",
-        ge=0,
-    )
-    # On the UR5's closed-loop joint paths of the planning-speed bench, 0.5 m asks 5.4 pairs per
-    # step against 7.7 at 0.15 m (a pair out of reach reads as at the reach, so a short reach
-    # brings it back soon)
-    query_reach: float = setting(
-        0.5,
-        "how far beyond influence a pair is queried before it is skipped until joints move",
-        "m",
-        gt=0,
-    )
-
-    def __post_init__(self) -> None:
-        check_group(self, "self_clearance")
-        if not self.influence > self.safety:
-            raise InvalidValueError(
-                "self_clearance.influence",
-                f"must be > self_clearance.safety ({self.safety})",
-                self.influence,
-            )
 
 
 @dataclass(frozen=True)

@@ -21,8 +21,9 @@ stage (settings group)   kind                what it changes; what it keeps
 ``contact``              command filter      within a few cm of a peer's real geometry: no step
 (:mod:`.contact_guard`)                      closes the gap; a blocked one turns up the real
                                              distance (only where the V rows are broken)
-``joint_limits``         command filter      no joint driven past its limit (first filter: the
-(:mod:`.joint_limits`)                       others check the step the arm takes); V rows stay
+``joint_limits``         row provider and    no joint driven past its limit (rows in Opt; first
+(:mod:`.joint_limits`)   command filter      filter: the others check the step the arm takes);
+                                             V rows stay
 =======================  ==================  ===================================================
 
 :func:`build_stages` makes the stages a planner's settings switch on.
@@ -83,6 +84,9 @@ def build_stages(host: Host) -> Staged:
     if s.escape.enabled:
         objectives.append(StallEscape(host))
     rows: list[RowProvider] = []
+    joint_limits = JointLimits(host) if s.joint_limits.enabled else None
+    if joint_limits is not None:
+        rows.append(joint_limits)
     self_clearance = (
         SelfClearance(host.robot, s.self_clearance, host) if s.self_clearance.enabled else None
     )
@@ -92,8 +96,8 @@ def build_stages(host: Host) -> Staged:
     if accel is not None:
         rows.append(accel)
     filters: list[CommandFilter] = []
-    if s.joint_limits.enabled:  # first: every later filter checks the step the arm takes
-        filters.append(JointLimits(host))
+    if joint_limits is not None:  # first: every later filter checks the step the arm takes
+        filters.append(joint_limits)
     if s.exact_guard.gap > 0.0:
         filters.append(ExactGuard(host))
     if s.contact.clearance > 0.0:  # it sees the command every stage before it shaped

@@ -20,7 +20,10 @@ rows are built there. They are linear, and a pair's distance can have a ridge in
 UR5's wrist against its upper arm, in wrist 2): a step up one side of it ends down the other.
 As a command filter the stage therefore checks, with the exact geometry, the end of the step
 (one ``opt.tick`` of it) for the pairs closer than ``self_clearance.check``: none may end below
-``min(d, d_s)``. A step that would is shortened (½, ¼) or, if none fits, the arm stays still.
+``min(d, d_s − slack)``. A step that would is shortened (½, ¼) or, if none fits, the arm stays
+still. The ``slack`` (1 mm) is the closing the rows cannot see: at ``d = d_s`` a row allows none
+to first order, the distance's curvature closes it by µm along almost any step, and without the
+slack every step of an arm resting there failed the check, so it never moved again.
 """
 
 from __future__ import annotations
@@ -86,6 +89,7 @@ class SelfClearance:
         self.check = s.check
         self.shortened = 0
         self.influence, self.safety, self.gain = s.influence, s.safety, s.gain
+        self.slack = s.slack
         self.query_reach = s.query_reach
         self._lease = WORLDS.lease(("self", robot), lambda: _self_world(robot), self)
         self._world = self._lease.world
@@ -251,7 +255,8 @@ class SelfClearance:
 
     def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
         """``u``, or the share of it (½, ¼, else 0) whose step of one ``opt.tick`` from where
-        the command starts leaves no pair closer than ``check`` below ``min(d, safety)``."""
+        the command starts leaves no pair closer than ``check`` below ``min(d, safety − slack)``
+        (``slack``: the closing a row at ``d = safety`` cannot see, its distance's curvature)."""
         if self.host is None or self.check <= 0.0:
             return u
         q = self.host.ahead(tick.q)
@@ -262,7 +267,7 @@ class SelfClearance:
         if not near:
             return u
         links = [self._links[pair] for pair, _ in near]
-        floors = np.minimum([d for _, d in near], self.safety) - 1e-6
+        floors = np.minimum([d for _, d in near], max(self.safety - self.slack, 0.0)) - 1e-6
         step = self.host.settings.opt.tick * u
         for scale in (1.0, 0.5, 0.25):
             self._world.set_joint_positions("self", q + scale * step)
