@@ -54,6 +54,7 @@ from nehmo_core.pairs.probes import RESULT
 from nehmo_core.pairs.reach import checked_range
 from nehmo_core.robots import registry
 from nehmo_core.robots.descriptions import robot_names
+from nehmo_core.robots.loader import atomic_write
 
 __all__ = ["PairBuild", "pair_names"]
 
@@ -145,10 +146,7 @@ class PairBuild:
         return state
 
     def _save(self) -> None:
-        self.work.mkdir(parents=True, exist_ok=True)
-        tmp = self.state_path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(self.state, indent=2) + "\n")
-        tmp.replace(self.state_path)
+        atomic_write(self.state_path, json.dumps(self.state, indent=2) + "\n")
 
     def done(self, stage: str) -> bool:
         return stage in self.state["stages"]
@@ -357,7 +355,7 @@ class PairBuild:
         card_path = self.models / f"distance_{self.pair}.json"
         card = json.loads(card_path.read_text())
         card["certificates"] = [{**cert, "command": "nehmo pair build (distance-certificate)"}]
-        card_path.write_text(json.dumps(card, indent=1) + "\n")
+        atomic_write(card_path, json.dumps(card, indent=1) + "\n")
         return StageRecord([], cert)
 
     def _value(self, game: str) -> StageRecord:
@@ -387,7 +385,7 @@ class PairBuild:
             }
         )
         shutil.copyfile(run / "model.safetensors", target.with_suffix(".safetensors"))
-        target.with_suffix(".json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+        atomic_write(target.with_suffix(".json"), json.dumps(meta, indent=2, sort_keys=True) + "\n")
         check = self._python(
             f"value check of {game}",
             ["value-check", game, "--variant", self.variant, "--samples", "4000", "--seed", "3"],
@@ -440,7 +438,7 @@ class PairBuild:
             "warnings": unlearned,
         }
         path = self.models / f"{self.pair}.card.json"
-        path.write_text(json.dumps(card, indent=2) + "\n")
+        atomic_write(path, json.dumps(card, indent=2) + "\n")
         return StageRecord([], {"card": str(path)})
 
 

@@ -130,7 +130,7 @@ def certify_stage(build: PairBuild, game: str, visited: bool) -> Stage:
     """Stages ``certify:<game>`` (uniform states) and ``certify-visited:<game>`` (the visit
     stage's): ``nehmo verify`` at the planner's ``t_safe``, recorded in the model card."""
     from nehmo_core.planning.settings import PlannerSettings
-    from nehmo_core.verify.cards import certificate_actuators
+    from nehmo_core.sim.actuators import certificate_actuators
 
     tau = PlannerSettings().opt.t_safe
     logs = sorted(str(p) for p in (build.work / "visit").glob("visit_*/logs"))

@@ -40,6 +40,8 @@ class JointLimits:
         bounded = ~np.asarray(robot.continuous, dtype=bool)
         self._lower = np.where(bounded, robot.lower, -np.inf)
         self._upper = np.where(bounded, robot.upper, np.inf)
+        self._eye = np.eye(robot.dof)
+        self._none = LinearRows(np.zeros((0, robot.dof)), np.zeros(0))  # no joint near a limit
         self.shortened = 0
 
     def reset(self) -> None:
@@ -55,9 +57,10 @@ class JointLimits:
         lower, upper = self._lower - q, self._upper - q  # room to each limit (−inf, inf: none)
         near_lower = np.flatnonzero(lower > -reach)
         near_upper = np.flatnonzero(upper < reach)
-        eye = np.eye(len(q))
+        if len(near_lower) + len(near_upper) == 0:  # most ticks, and every tick of a UR5
+            return self._none
         return LinearRows(
-            np.vstack([eye[near_lower], -eye[near_upper]]),
+            np.vstack([self._eye[near_lower], -self._eye[near_upper]]),
             np.concatenate(
                 [np.minimum(lower[near_lower], 0.0), -np.maximum(upper[near_upper], 0.0)]
             ),
