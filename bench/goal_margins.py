@@ -1,6 +1,7 @@
 """How many scenarios ask for goals that NeHMO's own safety margin forbids, and what became of them.
 
     ./run python bench/goal_margins.py --seeds 0,34,35   # bench/results/goal_margins.{json,md}
+    ./run python bench/goal_margins.py --runs OUT1,OUT2 --out NAME   # bench/results/NAME.{json,md}
 
 For every scenario of a set, all arms are put at their goals and each arm's problem Opt is
 built there as the planner would (worst-case peer prediction over ``t_plan``,
@@ -12,11 +13,17 @@ game), and for peers that announce the hold bound ``k`` (every arm settled: ``τ
 :mod:`nehmo_core.planning.stages.speed_bounds`; ``k = 0``: the goals' learned distance itself
 against ε). Seed 0 uses the committed tables (``bench/results/``), other seeds the fresh tables
 under ``bench/results/fresh/seed<S>/``; the outcomes of their ``nehmo`` rows are cross-tabulated.
+
+With ``--runs``: ``nehmo evaluate`` output folders (their ``summary.json`` and saved scenarios),
+the ``nehmo`` row's success rate by the goals' *separation* (the smallest exact PyBullet distance
+between two arms with every arm at its goal, in bins of :data:`SEPARATIONS`) beside the same
+margin test at the certified ε of each cell's models.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 from collections import Counter
 from pathlib import Path
@@ -26,6 +33,7 @@ import numpy as np
 from _report import machine_at_end, write_report
 
 from nehmo_core.eval.setups import get_setup
+from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.factory import make_planner
 from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
@@ -40,6 +48,7 @@ SETUPS = {  # setup → (table file, nehmo row)
     "ur5_kinova_challenging": ("table_IV_ur5_kinova_challenging.json", "nehmo/nehmo"),
 }
 T_PLANS = (0.1, 0.08, 0.04)
+SEPARATIONS = (0.01, 0.05, 0.1, 0.2)  # [m] bin edges of the goals' exact separation
 BOUNDS = (PlannerSettings().hold.bound, 0.0)
 
 
@@ -145,10 +154,109 @@ def markdown(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def separation(world: CellWorld, goal: dict[str, np.ndarray]) -> float:
+    """The smallest exact distance [m] between two arms with every arm at its goal."""
+    world.set_configuration(goal)
+    ids = list(goal)
+    return min(world.distance(a, b) for i, a in enumerate(ids) for b in ids[i + 1 :])
+
+
+def bin_label(d: float) -> str:
+    """The :data:`SEPARATIONS` bin of separation ``d`` [m], in cm."""
+    edges = [0.0, *SEPARATIONS, np.inf]
+    for lo, hi in itertools.pairwise(edges):
+        if d < hi:
+            return f"≥ {lo * 100:g} cm" if hi == np.inf else f"{lo * 100:g}–{hi * 100:g} cm"
+    raise AssertionError(d)
+
+
+def run_outputs(runs: list[Path], registry: ModelRegistry) -> dict[str, Any]:
+    """Success by goal separation and by the settled margin, per evaluation output."""
+    report: dict[str, Any] = {"machine": machine_at_end(), "runs": {}}
+    for run_dir in runs:
+        summary = json.loads((run_dir / "summary.json").read_text())
+        cell = get_setup(summary["setup"]).load_cell()
+        scenarios = load_scenario_set(next((run_dir / "scenarios").glob("*.json")))
+        row = next(r for r in summary["rows"] if r["row"].split("/")[0] == "nehmo")
+        outcome = {e["scenario"]: e["outcome"] for e in row["episodes"]}
+        models = registry.models_for("nehmo", cell)
+        planners = {a: make_planner("nehmo", cell, a, models) for a in cell.arm_ids}
+        bins: dict[str, Counter[str]] = {}
+        margin: Counter[str] = Counter()
+        with CellWorld(cell) as world:
+            for i, sc in zip(scenarios.indices, scenarios.scenarios, strict=True):
+                goal = {a: np.asarray(q) for a, q in sc.goal.items()}
+                o = outcome.get(i, "not run")
+                bins.setdefault(bin_label(separation(world, goal)), Counter())[o] += 1
+                inside = goal_margin(planners, goal, BOUNDS[0]) < 0  # type: ignore[arg-type]
+                margin[f"{o}/{'inside' if inside else 'outside'}"] += 1
+        epsilon = next(iter(planners.values())).settings.opt.epsilon
+        report["runs"][run_dir.name] = {
+            "setup": summary["setup"],
+            "seed": summary["seed"],
+            "epsilon": epsilon,
+            "by_separation": {k: dict(v) for k, v in bins.items()},
+            "outcomes_by_margin": dict(sorted(margin.items())),
+        }
+        print(run_dir.name, json.dumps(report["runs"][run_dir.name]), flush=True)
+    return report
+
+
+def runs_markdown(report: dict[str, Any]) -> str:
+    labels = [bin_label(x) for x in (0.0, *SEPARATIONS)]
+    lines = [
+        "# Success by how far apart the goals are",
+        "",
+        "NeHMO's successes / episodes of each evaluation, by the goals' separation: the smallest "
+        "exact distance between two arms with every arm at its goal. The last column counts "
+        "the episodes by outcome and by whether the goal set is inside the margin that rows "
+        f"against settled peers keep (every peer announcing the hold bound "
+        f"k = {BOUNDS[0]:g}): `bench/goal_margins.py` (its docstring).",
+        "",
+        "| run | setup | seed | ε [m] | "
+        + " | ".join(labels)
+        + " | all | outcome × settled margin |",
+        "|---|---|---|---|" + "---|" * (len(labels) + 2),
+    ]
+    total: dict[str, Counter[str]] = {}
+    for name, r in report["runs"].items():
+        cells = []
+        for label in labels:
+            c = Counter(r["by_separation"].get(label, {}))
+            total.setdefault(label, Counter()).update(c)
+            cells.append(f"{c['success']} / {sum(c.values())}" if c else "–")
+        every: Counter[str] = Counter()
+        for c in r["by_separation"].values():
+            every.update(c)
+        cross = ", ".join(f"{k}: {v}" for k, v in r["outcomes_by_margin"].items())
+        lines.append(
+            f"| {name} | {r['setup']} | {r['seed']} | {r['epsilon']:.4g} | "
+            + " | ".join(cells)
+            + f" | {every['success']} / {sum(every.values())} | {cross} |"
+        )
+    if len(report["runs"]) > 1:
+        cells = [
+            f"{total[x]['success']} / {sum(total[x].values())}" if x in total else "–"
+            for x in labels
+        ]
+        ok = sum(c["success"] for c in total.values())
+        n = sum(sum(c.values()) for c in total.values())
+        lines.append("| all | | | | " + " | ".join(cells) + f" | {ok} / {n} | |")
+    lines += ["", f"Machine: {report['machine']}.", ""]
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="0", help="comma-separated scenario-set seeds")
+    parser.add_argument("--runs", help="comma-separated `nehmo evaluate` output folders")
+    parser.add_argument("--out", default="goal_separation", help="result name (with --runs)")
     args = parser.parse_args()
+    if args.runs:
+        runs = [Path(r) for r in args.runs.split(",") if r]
+        report = run_outputs(runs, ModelRegistry())
+        print(write_report(RESULTS, args.out, report, runs_markdown))
+        return
     seeds = [int(s) for s in args.seeds.split(",") if s]
     print(write_report(RESULTS, "goal_margins", run(seeds), markdown))
 
