@@ -190,7 +190,9 @@ def run_outputs(runs: list[Path], registry: ModelRegistry) -> dict[str, Any]:
                 bins.setdefault(bin_label(separation(world, goal)), Counter())[o] += 1
                 inside = goal_margin(planners, goal, BOUNDS[0]) < 0  # type: ignore[arg-type]
                 margin[f"{o}/{'inside' if inside else 'outside'}"] += 1
-        epsilon = next(iter(planners.values())).settings.opt.epsilon
+        first = next(iter(planners.values()))
+        assert isinstance(first, NehmoPlanner)
+        epsilon = first.settings.opt.epsilon
         report["runs"][run_dir.name] = {
             "setup": summary["setup"],
             "seed": summary["seed"],

@@ -286,3 +286,76 @@ def test_an_arm_resting_at_the_safety_distance_can_leave_it() -> None:
         planner.close()
     assert moved[0.001] == pytest.approx(0.5)  # full speed toward the goal
     assert moved[0.0] == 0.0  # the old check: stuck for good
+
+
+# two Panda poses where every share of the step Opt returned failed the exact check (the
+# distance's curvature closed a pair at 4.0-4.1 mm by up to 0.8 mm in one tick) and the arm stood
+# still ~2 rad from its goal for the rest of the episode (dual_panda, development seeds 63 and
+# 62, scenarios 97 and 12, panda_1 at 12 s): pose, goal
+_CURVED = [
+    (
+        [
+            -1.267547043,
+            -0.858578289,
+            -0.542957265,
+            -2.799908749,
+            -0.233887541,
+            0.642248182,
+            1.162305314,
+        ],
+        [
+            -1.287547043,
+            -0.797973111,
+            -0.525630564,
+            -2.969980977,
+            -2.250058394,
+            0.053169357,
+            2.627594548,
+        ],
+    ),
+    (
+        [2.690657582, 1.588406487, 0.28267355, -2.371826514, 1.436034231, 2.682904852, 2.506537501],
+        [2.689886121, 1.6324975, 2.20001091, -2.930633577, 1.450737044, 2.687221285, 2.506537501],
+    ),
+]
+
+
+@pytest.mark.parametrize("case", range(len(_CURVED)))
+def test_a_step_the_exact_check_refuses_is_turned_to_open_the_pair(
+    case: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """When no share of the step passes the exact check, the command nearest it that opens the
+    near pairs (to first order) is checked instead: the arm keeps moving toward its goal and no
+    pair ends below its floor, tick after tick; without it the arm stays still."""
+    from nehmo_core.planning.nehmo import NehmoPlanner
+    from nehmo_core.planning.stages import self_clearance
+
+    cell = Cell("one_panda", (ArmSpec("panda_0", load_robot("panda"), Pose()),))
+    q0, goal = (np.array(v) for v in _CURVED[case])
+    settings = PlannerSettings()
+    sc = settings.self_clearance
+    floor = min(min(_distances(q0)), sc.safety - sc.slack) - 1e-6
+    for opening in (self_clearance.OPENING, ()):
+        monkeypatch.setattr(self_clearance, "OPENING", opening)
+        planner = NehmoPlanner(cell, "panda_0", [], settings)
+        stage = planner.stage("self_clearance")
+        assert isinstance(stage, SelfClearance)
+        q, pending = q0.copy(), np.zeros(7)
+        for _ in range(25):  # a command planned at one tick runs during the next
+            u = np.asarray(planner.plan(q, {}, goal).velocity)
+            q, pending = q + settings.opt.tick * pending, u
+            assert min(stage.distances(q).values()) >= floor
+        planner.close()
+        progress = np.linalg.norm(q0 - goal) - np.linalg.norm(q - goal)
+        if opening:
+            assert progress > 0.3  # 1 s of motion
+        else:
+            assert progress == 0.0  # the old filter: stuck for good
+
+
+def _distances(q: np.ndarray) -> list[float]:
+    stage = SelfClearance(load_robot("panda"))
+    try:
+        return list(stage.distances(q).values())
+    finally:
+        stage.close()

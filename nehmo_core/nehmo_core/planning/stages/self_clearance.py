@@ -20,7 +20,8 @@ rows are built there. They are linear, and a pair's distance can have a ridge in
 UR5's wrist against its upper arm, in wrist 2): a step up one side of it ends down the other.
 As a command filter the stage therefore checks, with the exact geometry, the end of the step
 (one ``opt.tick`` of it) for the pairs closer than ``self_clearance.check``: none may end below
-``min(d, d_s − slack)``. A step that would is shortened (½, ¼) or, if none fits, the arm stays
+``min(d, d_s − slack)``. A step that would is shortened (½, ¼), else turned to the command
+nearest it whose rows open those pairs by ``OPENING`` (checked the same way), else the arm stays
 still. The ``slack`` (1 mm) is the closing the rows cannot see: at ``d = d_s`` a row allows none
 to first order, the distance's curvature closes it by µm along almost any step, and without the
 slack every step of an arm resting there failed the check, so it never moved again.
@@ -53,6 +54,10 @@ class SelfClearanceRows(LinearRows):
     distances: np.ndarray  # (k,) d [m]
     pairs: tuple[tuple[str, str], ...]
 
+
+OPENING = (0.5e-3, 1.5e-3)
+"""[m] What a step must open the near pairs by, to first order, when every share of Opt's step
+failed the exact check (tried in turn)."""
 
 MIN_GRADIENT = 1e-4
 """Rows whose ``|∂d/∂q|`` is below this [m/rad] in every joint are left out."""
@@ -254,29 +259,38 @@ class SelfClearance:
         )
 
     def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:
-        """``u``, or the share of it (½, ¼, else 0) whose step of one ``opt.tick`` from where
-        the command starts leaves no pair closer than ``check`` below ``min(d, safety − slack)``
-        (``slack``: the closing a row at ``d = safety`` cannot see, its distance's curvature)."""
+        """``u``, or the share of it (½, ¼) whose step of one ``opt.tick`` from where the
+        command starts leaves no pair closer than ``check`` below ``min(d, safety − slack)``
+        (``slack``: the closing a row at ``d = safety`` cannot see, its distance's curvature);
+        else the command nearest ``u`` whose rows open those pairs by ``OPENING``; else 0."""
         if self.host is None or self.check <= 0.0:
             return u
         q = self.host.ahead(tick.q)
         rows = self.rows(q)
-        near = [
-            (pair, d) for pair, d in zip(rows.pairs, rows.distances, strict=True) if d < self.check
-        ]
-        if not near:
+        near = np.flatnonzero(rows.distances < self.check)
+        if not len(near):
             return u
-        links = [self._links[pair] for pair, _ in near]
-        floors = np.minimum([d for _, d in near], max(self.safety - self.slack, 0.0)) - 1e-6
-        step = self.host.settings.opt.tick * u
+        links = [self._links[rows.pairs[i]] for i in near]
+        d = rows.distances[near]
+        floors = np.minimum(d, max(self.safety - self.slack, 0.0)) - 1e-6
+        dt = self.host.settings.opt.tick
         for scale in (1.0, 0.5, 0.25):
-            self._world.set_joint_positions("self", q + scale * step)
-            ends = [self._pair_distance(la, lb) for la, lb in links]
-            if all(d is None or d >= f for d, f in zip(ends, floors, strict=True)):
+            if self._fits(q, scale * dt * u, links, floors):
                 self.shortened += scale < 1.0
                 return u * scale
         self.shortened += 1
+        y_max = dt * self.host.settings.opt.u_max * tick.cap
+        for opening in OPENING:  # the rows' curvature closed every share: open them instead
+            step = project_step(dt * u, LinearRows(rows.A[near], floors - d + opening), y_max)
+            if self._fits(q, step, links, floors):
+                return step / dt
         return np.zeros_like(u)
+
+    def _fits(self, q: np.ndarray, step: np.ndarray, links: list, floors: np.ndarray) -> bool:
+        """Whether no pair of ``links`` ends below its floor after ``step`` from ``q``."""
+        self._world.set_joint_positions("self", q + step)
+        ends = [self._pair_distance(la, lb) for la, lb in links]
+        return all(e is None or e >= f for e, f in zip(ends, floors, strict=True))
 
     def _pair_distance(self, link_a: int, link_b: int) -> float | None:
         """The posed links' signed distance [m] (None if farther than ``influence``)."""
