@@ -273,8 +273,10 @@ def test_an_arm_resting_at_the_safety_distance_can_leave_it() -> None:
     cell = Cell("one_panda", (ArmSpec("panda_0", load_robot("panda"), Pose()),))
     q, goal = np.array(_RESTING), np.array(_RESTING_GOAL)
     moved = {}
-    for slack in (0.001, 0.0):
-        settings = PlannerSettings().override({"self_clearance.slack": slack})
+    for slack in (0.001, 0.0):  # the opening (next test) would free it too: off here
+        settings = PlannerSettings().override(
+            {"self_clearance.slack": slack, "self_clearance.opening": 0.0}
+        )
         planner = NehmoPlanner(cell, "panda_0", [], settings)
         stage = planner.stage("self_clearance")
         assert isinstance(stage, SelfClearance)
@@ -321,22 +323,18 @@ _CURVED = [
 
 
 @pytest.mark.parametrize("case", range(len(_CURVED)))
-def test_a_step_the_exact_check_refuses_is_turned_to_open_the_pair(
-    case: int, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_a_step_the_exact_check_refuses_is_turned_to_open_the_pair(case: int) -> None:
     """When no share of the step passes the exact check, the command nearest it that opens the
     near pairs (to first order) is checked instead: the arm keeps moving toward its goal and no
     pair ends below its floor, tick after tick; without it the arm stays still."""
     from nehmo_core.planning.nehmo import NehmoPlanner
-    from nehmo_core.planning.stages import self_clearance
 
     cell = Cell("one_panda", (ArmSpec("panda_0", load_robot("panda"), Pose()),))
     q0, goal = (np.array(v) for v in _CURVED[case])
-    settings = PlannerSettings()
-    sc = settings.self_clearance
+    sc = PlannerSettings().self_clearance
     floor = min(min(_distances(q0)), sc.safety - sc.slack) - 1e-6
-    for opening in (self_clearance.OPENING, ()):
-        monkeypatch.setattr(self_clearance, "OPENING", opening)
+    for opening in (sc.opening, 0.0):
+        settings = PlannerSettings().override({"self_clearance.opening": opening})
         planner = NehmoPlanner(cell, "panda_0", [], settings)
         stage = planner.stage("self_clearance")
         assert isinstance(stage, SelfClearance)

@@ -63,6 +63,16 @@ class SelfClearanceSettings:
         "m",
         ge=0,
     )
+    # the curvature closed pairs at 4.0-4.1 mm by up to 0.8 mm in one tick along steps the rows
+    # kept at zero, every share failed, and two Pandas stood still ~2 rad from their goals for
+    # good (dual_panda development seeds 62 and 63; 373 -> 375 of 400 on seeds 60-63)
+    opening: float = setting(
+        0.0005,
+        "what a step the check refused at every share must open the near pairs by, to first "
+        "order, per tick (then 3x that; 0: stop the arm instead)",
+        "m",
+        ge=0,
+    )
     # On the UR5's closed-loop joint paths of the planning-speed bench, 0.5 m asks 5.4 pairs per
     # step against 7.7 at 0.15 m (a pair out of reach reads as at the reach, so a short reach
     # brings it back soon)

@@ -21,7 +21,7 @@ UR5's wrist against its upper arm, in wrist 2): a step up one side of it ends do
 As a command filter the stage therefore checks, with the exact geometry, the end of the step
 (one ``opt.tick`` of it) for the pairs closer than ``self_clearance.check``: none may end below
 ``min(d, d_s − slack)``. A step that would is shortened (½, ¼), else turned to the command
-nearest it whose rows open those pairs by ``OPENING`` (checked the same way), else the arm stays
+nearest it whose rows open those pairs by ``opening`` (checked the same way), else the arm stays
 still. The ``slack`` (1 mm) is the closing the rows cannot see: at ``d = d_s`` a row allows none
 to first order, the distance's curvature closes it by µm along almost any step, and without the
 slack every step of an arm resting there failed the check, so it never moved again.
@@ -54,10 +54,6 @@ class SelfClearanceRows(LinearRows):
     distances: np.ndarray  # (k,) d [m]
     pairs: tuple[tuple[str, str], ...]
 
-
-OPENING = (0.5e-3, 1.5e-3)
-"""[m] What a step must open the near pairs by, to first order, when every share of Opt's step
-failed the exact check (tried in turn)."""
 
 MIN_GRADIENT = 1e-4
 """Rows whose ``|∂d/∂q|`` is below this [m/rad] in every joint are left out."""
@@ -94,7 +90,7 @@ class SelfClearance:
         self.check = s.check
         self.shortened = 0
         self.influence, self.safety, self.gain = s.influence, s.safety, s.gain
-        self.slack = s.slack
+        self.slack, self.opening = s.slack, s.opening
         self.query_reach = s.query_reach
         self._lease = WORLDS.lease(("self", robot), lambda: _self_world(robot), self)
         self._world = self._lease.world
@@ -262,7 +258,7 @@ class SelfClearance:
         """``u``, or the share of it (½, ¼) whose step of one ``opt.tick`` from where the
         command starts leaves no pair closer than ``check`` below ``min(d, safety − slack)``
         (``slack``: the closing a row at ``d = safety`` cannot see, its distance's curvature);
-        else the command nearest ``u`` whose rows open those pairs by ``OPENING``; else 0."""
+        else the command nearest ``u`` whose rows open those pairs by ``opening``; else 0."""
         if self.host is None or self.check <= 0.0:
             return u
         q = self.host.ahead(tick.q)
@@ -280,7 +276,8 @@ class SelfClearance:
                 return u * scale
         self.shortened += 1
         y_max = dt * self.host.settings.opt.u_max * tick.cap
-        for opening in OPENING:  # the rows' curvature closed every share: open them instead
+        openings = (self.opening, 3 * self.opening) if self.opening > 0 else ()
+        for opening in openings:  # the curvature closed every share: open the pairs instead
             step = project_step(dt * u, LinearRows(rows.A[near], floors - d + opening), y_max)
             if self._fits(q, step, links, floors):
                 return step / dt
