@@ -187,3 +187,30 @@ def test_saved_sets_of_another_sampling_revision_are_redrawn(tmp_path: Path) -> 
         again.scenarios[0].start["ur5_0"], made.scenarios[0].start["ur5_0"]
     )
     assert json.loads(path.read_text())["meta"]["sampling"] == SAMPLING_REVISION
+
+
+def test_cells_beyond_the_papers_keep_their_goals_apart(tmp_path: Path) -> None:
+    """dual_panda seed 83, candidate 3 has goals 3 mm apart: it is skipped, every kept goal set
+    is ``goal_separation`` apart (exact distance), and the kept candidates are the unfiltered
+    draws of the same numbers; a saved set drawn without the rule is redrawn."""
+    setup = get_setup("dual_panda")
+    assert setup.goal_separation == pytest.approx(0.02)
+    assert get_setup("dual_ur5").goal_separation == 0.0  # the paper's protocol
+    cell = setup.load_cell()
+    plain = scenario_set_for(replace(setup, goal_separation=0.0), 83, 5, directory=tmp_path)
+    assert plain.indices == (0, 1, 2, 3, 4)
+    kept = scenario_set_for(setup, 83, 5, directory=tmp_path)  # the saved plain set is redrawn
+    assert kept.indices == (0, 1, 2, 4, 5)
+    with CellWorld(cell) as world:
+
+        def separation(goal: dict[str, np.ndarray]) -> float:
+            world.set_configuration(goal)
+            return world.distance(*cell.arm_ids)
+
+        assert separation(plain.scenarios[3].goal) < 0.01
+        assert all(separation(s.goal) >= 0.02 for s in kept.scenarios)
+    for i, s in zip(kept.indices[:3], kept.scenarios[:3], strict=True):
+        for a in cell.arm_ids:
+            np.testing.assert_array_equal(s.goal[a], plain.scenarios[i].goal[a])
+    with pytest.raises(InvalidValueError, match="goal_separation"):
+        replace(setup, goal_separation=-0.01)

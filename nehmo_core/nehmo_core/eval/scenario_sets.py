@@ -5,18 +5,22 @@ Scenario ``i`` of the set with seed ``s`` is drawn by the paper's protocol from
 challenging set keeps, like the authors, the first candidates in which the naive planner on every
 arm ends in a collision *between the arms* (a naive self-collision does not qualify), run by the
 same episode runner and rules as the evaluation, so its Naive / Naive row collides in every
-episode by construction.
+episode by construction. The cells beyond the paper's keep their goals
+:data:`~nehmo_core.eval.setups.GOAL_SEPARATION` apart (``Setup.goal_separation``): a candidate
+whose goals are closer is skipped, so scenario ``i`` stays candidate ``i`` until the first skip.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from contextlib import ExitStack
 from pathlib import Path
 
 from nehmo_core.errors import UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.setups import SCENARIO_FILTERS, Setup
+from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.baselines.naive import NaivePlanner
 from nehmo_core.robots.loader import is_cell_file
 from nehmo_core.robots.model import Cell
@@ -24,7 +28,7 @@ from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set
 from nehmo_core.sim.scenarios import SAMPLING_REVISION, Scenario, ScenarioSet, generate_scenario_set
 
-__all__ = ["naive_collides", "scenario_set_for", "scenario_set_path"]
+__all__ = ["goals_apart", "naive_collides", "scenario_set_for", "scenario_set_path"]
 
 
 def naive_collides(
@@ -40,6 +44,22 @@ def naive_collides(
     def accept(scenario: Scenario) -> bool:
         result = run_episode(cell, scenario, planners, settings, simulator=sim)
         return result.outcome == "collision" and any(c.arm_a != c.arm_b for c in result.collisions)
+
+    return accept
+
+
+def goals_apart(world: CellWorld, separation: float) -> Callable[[Scenario], bool]:
+    """A filter: true when, with every arm at its goal, no two arms are closer than
+    ``separation`` [m] (exact distance, ``world`` the cell's)."""
+
+    def accept(scenario: Scenario) -> bool:
+        world.set_configuration(scenario.goal)
+        ids = list(scenario.goal)
+        return all(
+            world.distance(a, b, cutoff=separation + 0.01) >= separation
+            for i, a in enumerate(ids)
+            for b in ids[i + 1 :]
+        )
 
     return accept
 
@@ -68,20 +88,35 @@ def scenario_set_for(
         if (
             saved.meta.get("setup") == setup.name
             and saved.meta.get("sampling") == SAMPLING_REVISION
+            and saved.meta.get("goal_separation", 0.0) == setup.goal_separation
             and len(saved) >= count
         ):
             return saved.head(count)
     cell = setup.load_cell()
     settings = EpisodeSettings.for_setup(setup)
-    meta = {"setup": setup.name, "filter": setup.scenario_filter, "sampling": SAMPLING_REVISION}
-    if setup.scenario_filter is None:
-        made = generate_scenario_set(cell, seed, count, None, max_candidates, meta, progress)
-    elif setup.scenario_filter == "naive_collides":
-        with CellSimulator(cell, settings.substeps, settings.self_collision) as sim:
-            accept = naive_collides(cell, settings, sim)
-            made = generate_scenario_set(cell, seed, count, accept, max_candidates, meta, progress)
-    else:
-        raise UnknownNameError("scenario filter", setup.scenario_filter, SCENARIO_FILTERS)
+    meta = {
+        "setup": setup.name,
+        "filter": setup.scenario_filter,
+        "sampling": SAMPLING_REVISION,
+        "goal_separation": setup.goal_separation,
+    }
+    with ExitStack() as stack:
+        tests = []
+        if setup.goal_separation > 0:
+            world = stack.enter_context(CellWorld(cell))
+            tests.append(goals_apart(world, setup.goal_separation))
+        if setup.scenario_filter == "naive_collides":
+            sim = CellSimulator(cell, settings.substeps, settings.self_collision)
+            tests.append(naive_collides(cell, settings, stack.enter_context(sim)))
+        elif setup.scenario_filter is not None:
+            raise UnknownNameError("scenario filter", setup.scenario_filter, SCENARIO_FILTERS)
+
+        def accept(scenario: Scenario) -> bool:
+            return all(test(scenario) for test in tests)  # the cheap test first
+
+        made = generate_scenario_set(
+            cell, seed, count, accept if tests else None, max_candidates, meta, progress
+        )
     if is_cell_file(setup.cell):  # a user's cell: its file, which loads anywhere
         made = dataclasses.replace(made, cell=str(Path(setup.cell).resolve()))
     if path is not None:

@@ -54,6 +54,9 @@ class Setup:
     scenario_filter: str | None = None
     unmodelled_peers_ok: bool = False  # 3/5-arm cells: models only ship at 0.6 m for bc, DeepReach
     description: str = ""
+    # [m] the smallest exact distance between two arms with every arm at its goal (0: any
+    # collision-free goal, the paper's protocol; its cells keep it)
+    goal_separation: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.time_limit > 0:
@@ -62,12 +65,20 @@ class Setup:
             raise UnknownNameError("success norm", self.success_norm, SUCCESS_NORMS)
         if not self.success_tolerance > 0:
             raise InvalidValueError("success_tolerance", "must be > 0", self.success_tolerance)
+        if not self.goal_separation >= 0:
+            raise InvalidValueError("goal_separation", "must be >= 0 [m]", self.goal_separation)
         if self.scenario_filter is not None and self.scenario_filter not in SCENARIO_FILTERS:
             raise UnknownNameError("scenario filter", self.scenario_filter, SCENARIO_FILTERS)
 
     def load_cell(self) -> Cell:
         return load_cell(self.cell)
 
+
+GOAL_SEPARATION = 0.02
+"""[m] How far apart the goals of the cells beyond the paper's (and of a user's cell file) are at
+least: the smallest exact distance between two arms with every arm at its goal, as the crowd task
+generator keeps them (``nehmo tasks generate``'s ``clearance``). Closer goals ask two arms to
+rest within the 1 cm that planners keep from a settled peer and its real geometry."""
 
 SETUPS: dict[str, Setup] = {
     s.name: s
@@ -99,13 +110,26 @@ SETUPS: dict[str, Setup] = {
             description="UR5 + Kinova Gen3, scenarios where naive arms collide (Table IV)",
         ),
         Setup("ur5_kinova", "ur5_kinova", 20.0, description="UR5 + Kinova Gen3, random scenarios"),
-        Setup("dual_panda", "dual_panda", 20.0, description="two Pandas 0.6 m apart, facing"),
-        Setup("ur5_panda", "ur5_panda", 20.0, description="UR5 + Panda 0.6 m apart, facing"),
+        Setup(
+            "dual_panda",
+            "dual_panda",
+            20.0,
+            description="two Pandas 0.6 m apart, facing",
+            goal_separation=GOAL_SEPARATION,
+        ),
+        Setup(
+            "ur5_panda",
+            "ur5_panda",
+            20.0,
+            description="UR5 + Panda 0.6 m apart, facing",
+            goal_separation=GOAL_SEPARATION,
+        ),
         Setup(
             "mixed_four",
             "mixed_four",
             30.0,
             description="two UR5s and two Pandas at irregular poses (0.70-1.21 m apart)",
+            goal_separation=GOAL_SEPARATION,
         ),
     )
 }
@@ -117,12 +141,18 @@ USER_CELL_TIME_LIMIT = 20.0  # [s] a user's cell file: the paper's two-arm episo
 def get_setup(name: str) -> Setup:
     """The setup called ``name``, or for a cell file (``*.yaml``) a setup of that cell with the
     paper's two-arm rules (20 s, every arm within 0.1 rad L2 of its goal at once, named after the
-    file's ``name``); raises listing the valid names."""
+    file's ``name``) and goals :data:`GOAL_SEPARATION` apart; raises listing the valid names."""
     if name in SETUPS:
         return SETUPS[name]
     if is_cell_file(name):
         cell = load_cell(name)
-        return Setup(cell.name, name, USER_CELL_TIME_LIMIT, description=f"the cell of {name}")
+        return Setup(
+            cell.name,
+            name,
+            USER_CELL_TIME_LIMIT,
+            description=f"the cell of {name}",
+            goal_separation=GOAL_SEPARATION,
+        )
     raise UnknownNameError("setup", name, [*SETUPS, "<a cell file>.yaml"])
 
 
