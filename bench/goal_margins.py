@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from _report import machine_at_end, write_report
 
+from nehmo_core.eval.scenario_sets import goal_separation
 from nehmo_core.eval.setups import get_setup
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.factory import make_planner
@@ -154,13 +155,6 @@ def markdown(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def separation(world: CellWorld, goal: dict[str, np.ndarray]) -> float:
-    """The smallest exact distance [m] between two arms with every arm at its goal."""
-    world.set_configuration(goal)
-    ids = list(goal)
-    return min(world.distance(a, b) for i, a in enumerate(ids) for b in ids[i + 1 :])
-
-
 def bin_label(d: float) -> str:
     """The :data:`SEPARATIONS` bin of separation ``d`` [m], in cm."""
     edges = [0.0, *SEPARATIONS, np.inf]
@@ -187,7 +181,7 @@ def run_outputs(runs: list[Path], registry: ModelRegistry) -> dict[str, Any]:
             for i, sc in zip(scenarios.indices, scenarios.scenarios, strict=True):
                 goal = {a: np.asarray(q) for a, q in sc.goal.items()}
                 o = outcome.get(i, "not run")
-                bins.setdefault(bin_label(separation(world, goal)), Counter())[o] += 1
+                bins.setdefault(bin_label(goal_separation(world, goal)), Counter())[o] += 1
                 inside = goal_margin(planners, goal, BOUNDS[0]) < 0  # type: ignore[arg-type]
                 margin[f"{o}/{'inside' if inside else 'outside'}"] += 1
         first = next(iter(planners.values()))

@@ -31,6 +31,7 @@ from pathlib import Path
 
 from nehmo_core.eval.episode_log import read_episode_log
 from nehmo_core.eval.metrics import goal_distance
+from nehmo_core.eval.scenario_sets import goal_separation
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.planning.settings import PlannerSettings
 
@@ -61,8 +62,7 @@ def reason(path: str, world: CellWorld | None) -> tuple[str, CellWorld]:
     w = world or CellWorld(log.cell)
     ids = list(log.cell.arm_ids)
     pairs = list(itertools.combinations(ids, 2))
-    w.set_configuration({a: log.goals[a] for a in ids})
-    if min(w.distance(a, b) for a, b in pairs) < FLOOR:
+    if goal_separation(w, {a: log.goals[a] for a in ids}) < FLOOR:
         return REASONS[0], w
     final = {a: log.positions[a][-1] for a in ids}
     w.set_configuration(final)

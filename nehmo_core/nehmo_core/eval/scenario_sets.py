@@ -13,14 +13,16 @@ whose goals are closer is skipped, so scenario ``i`` stays candidate ``i`` until
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from contextlib import ExitStack
 from pathlib import Path
+
+import numpy as np
 
 from nehmo_core.errors import UnknownNameError
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.setups import SCENARIO_FILTERS, Setup
-from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.geometry.pybullet_world import DEFAULT_CUTOFF, CellWorld
 from nehmo_core.planning.baselines.naive import NaivePlanner
 from nehmo_core.robots.loader import is_cell_file
 from nehmo_core.robots.model import Cell
@@ -28,7 +30,13 @@ from nehmo_core.sim.cell_sim import CellSimulator
 from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set
 from nehmo_core.sim.scenarios import SAMPLING_REVISION, Scenario, ScenarioSet, generate_scenario_set
 
-__all__ = ["goals_apart", "naive_collides", "scenario_set_for", "scenario_set_path"]
+__all__ = [
+    "goal_separation",
+    "goals_apart",
+    "naive_collides",
+    "scenario_set_for",
+    "scenario_set_path",
+]
 
 
 def naive_collides(
@@ -48,18 +56,21 @@ def naive_collides(
     return accept
 
 
+def goal_separation(
+    world: CellWorld, goal: Mapping[str, np.ndarray], cutoff: float = DEFAULT_CUTOFF
+) -> float:
+    """The smallest exact distance [m] between two arms with every arm at its ``goal``
+    (``world`` the cell's; ``cutoff`` when every pair is farther apart than it)."""
+    world.set_configuration(goal)
+    ids = list(goal)
+    return min(world.distance(a, b, cutoff) for i, a in enumerate(ids) for b in ids[i + 1 :])
+
+
 def goals_apart(world: CellWorld, separation: float) -> Callable[[Scenario], bool]:
-    """A filter: true when, with every arm at its goal, no two arms are closer than
-    ``separation`` [m] (exact distance, ``world`` the cell's)."""
+    """A filter: true when :func:`goal_separation` is at least ``separation`` [m]."""
 
     def accept(scenario: Scenario) -> bool:
-        world.set_configuration(scenario.goal)
-        ids = list(scenario.goal)
-        return all(
-            world.distance(a, b, cutoff=separation + 0.01) >= separation
-            for i, a in enumerate(ids)
-            for b in ids[i + 1 :]
-        )
+        return goal_separation(world, scenario.goal, separation + 0.01) >= separation
 
     return accept
 
