@@ -452,3 +452,28 @@ def test_evaluate_with_out_naming_a_file_is_one_clear_error(tmp_path: Path) -> N
     args = ["--setup", "dual_ur5", "--planners", "naive", "--episodes", "1", "--out", str(a_file)]
     assert evaluate_main(args) == 2
     assert a_file.read_text() == ""
+
+
+def test_time_limit_option_sets_the_episode_length_and_is_checked(tmp_path: Path) -> None:
+    """``--time-limit`` replaces the setup's episode length (recorded in the summary; no
+    episode runs past it) and a length that is not positive is one clear error."""
+    import argparse
+
+    from nehmo_core.eval import cli
+
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    argv = ["--setup", "dual_ur5", "--planners", "naive", "--episodes", "2", "--no-progress"]
+    args = parser.parse_args([*argv, "--out", str(tmp_path / "a"), "--time-limit", "0.6"])
+    assert cli.run(args) == 0
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert summary["episode_settings"]["time_limit"] == 0.6
+    episodes = summary["rows"][0]["episodes"]
+    assert all(e["end_time"] <= 0.6 + 1e-9 for e in episodes)
+    assert any(e["outcome"] == "stuck" and e["end_time"] == pytest.approx(0.6) for e in episodes)
+    for bad in ("0", "-5", "nan"):
+        out = tmp_path / f"bad{bad}"
+        args = parser.parse_args([*argv, "--out", str(out), "--time-limit", bad])
+        with pytest.raises(InvalidValueError, match="--time-limit"):
+            cli.run(args)
+        assert not out.exists()

@@ -183,3 +183,18 @@ def test_a_resumed_task_run_runs_only_the_unfinished_tasks(
     assert [(e["task"], e["outcome"], e["end_time"]) for e in again] == [
         (e["task"], e["outcome"], e["end_time"]) for e in first
     ]
+
+
+def test_tasks_run_for_the_time_limit_given(tmp_path: Path) -> None:
+    """``--time-limit`` reaches the task runner: no episode runs past it, and the summary's
+    success rule states it."""
+    tasks = tmp_path / "tasks"
+    tasks.mkdir()
+    shutil.copy(TASKS / "135011.json", tasks / "135011.json")  # 2 arms
+    out = tmp_path / "out"
+    args = ["--tasks", str(tasks), "--planners", "naive", "--out", str(out), "--no-progress"]
+    assert evaluate_main([*args, "--time-limit", "0.5"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["episode_settings"]["time_limit"] == 0.5
+    assert "within 0.5 s" in summary["success_rule"]
+    assert all(e["end_time"] <= 0.5 + 1e-9 for e in summary["rows"][0]["episodes"])

@@ -119,6 +119,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="how simulated arms carry commands out: ideal (q' = u, the paper's) or realistic "
         "(acceleration limits from the robot descriptions, command latency, joint-state noise)",
     )
+    parser.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="episode length in simulated seconds (default: the setup's, 20 s for tasks); "
+        "longer episodes tell arms that deadlock from arms that arrive late, but the success "
+        "rule is then no longer the paper's",
+    )
     parser.add_argument("--render", action="store_true", help="render each row's first episode")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -155,7 +164,10 @@ def _run_tasks(args: argparse.Namespace, rows: list[str], settings: PlannerSetti
         ),
         backend=args.backend,
         planner_settings=settings,
-        episode=EpisodeSettings(time_limit=TIME_LIMIT, actuators=args.actuators),
+        episode=EpisodeSettings(
+            time_limit=TIME_LIMIT if args.time_limit is None else args.time_limit,
+            actuators=args.actuators,
+        ),
     )
 
     def report(row: dict[str, object]) -> None:
@@ -197,6 +209,16 @@ def _errors_status(errors: dict[str, int]) -> int:
     return 0
 
 
+def _episode_overrides(args: argparse.Namespace) -> tuple[tuple[str, object], ...]:
+    """What the options change of the setup's episode settings."""
+    overrides: list[tuple[str, object]] = []
+    if args.actuators != "ideal":
+        overrides.append(("actuators", args.actuators))
+    if args.time_limit is not None:
+        overrides.append(("time_limit", float(args.time_limit)))
+    return tuple(overrides)
+
+
 def run(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise InvalidValueError("--episodes", "must be >= 1", args.episodes)
@@ -206,6 +228,8 @@ def run(args: argparse.Namespace) -> int:
     rows = [r.strip() for r in args.planners.split(",") if r.strip()]
     if not rows:
         raise InvalidValueError("--planners", "must name at least one row", args.planners)
+    if args.time_limit is not None and not args.time_limit > 0:
+        raise InvalidValueError("--time-limit", "must be > 0 [s]", args.time_limit)
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise InvalidValueError("--out", "must be a directory (it is a file)", str(args.out))
     if args.setup is not None:
@@ -233,8 +257,8 @@ def run(args: argparse.Namespace) -> int:
         ),
         backend=args.backend,
         planner_settings=planner_settings,
-        # ideal: no override, so runs before this option resume as they were
-        episode_overrides=() if args.actuators == "ideal" else (("actuators", args.actuators),),
+        # defaults: no override, so runs before these options resume as they were
+        episode_overrides=_episode_overrides(args),
     )
     scenarios = _scenarios(args)
 
