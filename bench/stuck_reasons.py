@@ -82,9 +82,24 @@ def reason(path: str, world: CellWorld | None) -> tuple[str, CellWorld]:
     return REASONS[4], w
 
 
+def episodes_by_row(run: Path) -> list[tuple[str, int, list[dict]]]:
+    """``(row, arm count, episodes)`` of one ``nehmo evaluate`` output, each episode's ``log``
+    found where the run wrote it (relative paths are resolved inside ``run``)."""
+    summary = json.loads((run / "summary.json").read_text())
+    out = []
+    for row in summary["rows"]:
+        groups: dict[int, list[dict]] = {}
+        for e in row["episodes"]:
+            log = Path(e["log"])
+            if not log.is_absolute() and not log.exists():  # relative to where it ran
+                log = next(run.glob(f"logs/*/{log.name}"), log)
+            groups.setdefault(int(e.get("arms", 0)), []).append({**e, "log": str(log)})
+        out += [(row["row"], arms, episodes) for arms, episodes in sorted(groups.items())]
+    return out
+
+
 def by_run(run: Path, name: str) -> int:
     """The stuck episodes of every row of one ``nehmo evaluate`` output, by arm count."""
-    summary = json.loads((run / "summary.json").read_text())
     out: dict[str, dict[str, dict[str, int]]] = {}
     lines = [
         f"# Why episodes end stuck: `{run.name}`",
@@ -95,23 +110,16 @@ def by_run(run: Path, name: str) -> int:
         "| row | arms | episodes | stuck | " + " | ".join(REASONS) + " |",
         "|---|---|---|---|" + "---|" * len(REASONS),
     ]
-    for row in summary["rows"]:
-        groups: dict[int, list[dict]] = {}
-        for e in row["episodes"]:
-            log = Path(e["log"])
-            if not log.is_absolute() and not log.exists():  # relative to where it ran
-                log = next(run.glob(f"logs/*/{log.name}"), log)
-            groups.setdefault(int(e.get("arms", 0)), []).append({**e, "log": str(log)})
-        for arms, episodes in sorted(groups.items()):
-            counts: Counter[str] = Counter()
-            for e in episodes:
-                if e["outcome"] == "stuck":
-                    why, world = reason(e["log"], None)  # each task has its own cell
-                    world.close()
-                    counts[why] += 1
-            out.setdefault(row["row"], {})[str(arms)] = dict(counts)
-            lines.append(f"| {row['row']} | {arms or '-'} | {len(episodes)} | {_cells(counts)}")
-            print(lines[-1], flush=True)
+    for row, arms, episodes in episodes_by_row(run):
+        counts: Counter[str] = Counter()
+        for e in episodes:
+            if e["outcome"] == "stuck":
+                why, world = reason(e["log"], None)  # each task has its own cell
+                world.close()
+                counts[why] += 1
+        out.setdefault(row, {})[str(arms)] = dict(counts)
+        lines.append(f"| {row} | {arms or '-'} | {len(episodes)} | {_cells(counts)}")
+        print(lines[-1], flush=True)
     _write(name, out, lines)
     return 0
 

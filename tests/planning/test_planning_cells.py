@@ -422,6 +422,49 @@ def test_ompl_paths_keep_their_clearance_and_endpoints_may_lower_it() -> None:
         assert min(dense) > 0.5 * result.clearance
 
 
+def test_one_arm_plans_past_a_frozen_peer_and_names_a_blocked_end() -> None:
+    """``plan_arm_alone``: a path from the arm's start to its goal whose states keep the
+    clearance from the frozen peer and are free of self-collision; an end that does not is
+    named, with nothing searched; a bad clearance is one clear error."""
+    from nehmo_core.planning.baselines.ompl import plan_arm_alone
+
+    cell = load_cell("dual_ur5")
+    scenario = sample_scenario(cell, np.random.default_rng(4))
+    with CellWorld(cell) as world:
+        world.set_configuration(scenario.start)
+        clearance = 0.5 * min(0.05, world.distance("ur5_0", "ur5_1"))
+        path = plan_arm_alone(
+            cell, "ur5_0", scenario.start, scenario.goal["ur5_0"], clearance, 10.0, world=world
+        )
+        assert path.solved and not path.blocked
+        np.testing.assert_allclose(path.waypoints[0], scenario.start["ur5_0"])
+        np.testing.assert_allclose(path.waypoints[-1], scenario.goal["ur5_0"])
+        assert path.length >= np.linalg.norm(scenario.goal["ur5_0"] - scenario.start["ur5_0"])
+        world.set_configuration(scenario.start)
+        for q in path.waypoints:
+            world.set_joint_positions("ur5_0", q)
+            assert world.distance("ur5_0", "ur5_1") >= clearance
+            assert not world.self_collisions("ur5_0")
+        # a goal inside the frozen peer: found by sampling, then named as blocked
+        rng = np.random.default_rng(0)
+        robot = cell.arm("ur5_0").robot
+        for _ in range(2000):
+            inside = rng.uniform(robot.lower, robot.upper)
+            world.set_joint_positions("ur5_0", inside)
+            if world.distance("ur5_0", "ur5_1") < 0.0:
+                break
+        else:
+            pytest.fail("no configuration of ur5_0 inside ur5_1 was sampled")
+        blocked = plan_arm_alone(cell, "ur5_0", scenario.start, inside, clearance, world=world)
+        assert blocked.blocked == "goal" and not blocked.solved and blocked.length == 0.0
+        far = plan_arm_alone(
+            cell, "ur5_0", scenario.start, scenario.goal["ur5_0"], 1.0, world=world
+        )
+        assert far.blocked == "start"  # bases 0.6 m apart: no pose keeps 1 m
+    with pytest.raises(InvalidValueError, match="clearance"):
+        plan_arm_alone(cell, "ur5_0", scenario.start, scenario.goal["ur5_0"], -0.01)
+
+
 def test_chomp_check_reports_self_collisions() -> None:
     from nehmo_core.planning.baselines.chomp import _collision_free
 

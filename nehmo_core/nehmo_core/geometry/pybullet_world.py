@@ -167,6 +167,11 @@ class CellWorld:
             return float(cutoff)
         return float(min(p[8] for p in pts))
 
+    def self_collisions(self, arm_id: str, margin: float = 0.0) -> list[Collision]:
+        """The collisions of arm ``arm_id`` with itself (its checked link pairs within
+        ``margin`` [m]) in the current configuration."""
+        return self._self_collisions(self.cell.arm(arm_id), margin)
+
     def _self_collisions(self, arm: ArmSpec, margin: float) -> list[Collision]:
         body = self._body[arm.arm_id]
         idx = self._link_index[arm.arm_id]

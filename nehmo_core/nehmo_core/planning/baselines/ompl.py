@@ -1,4 +1,6 @@
-"""OMPL RRT-Connect over the composite joint space of all arms: a centralized sampling peer.
+"""OMPL RRT-Connect over the composite joint space of all arms: a centralized sampling peer
+(:func:`plan_rrt_connect`), and over one arm's joints with the others frozen
+(:func:`plan_arm_alone`, a diagnostic of what a standing peer leaves free).
 
 The state is every arm's joint vector stacked in the cell's arm order, bounded per joint by
 the joint limits (continuous joints: one turn either way); start and goal are used as given.
@@ -33,7 +35,7 @@ from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.robots.model import Cell
 
-__all__ = ["OmplResult", "OmplSettings", "plan_rrt_connect"]
+__all__ = ["ArmPath", "OmplResult", "OmplSettings", "plan_arm_alone", "plan_rrt_connect"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +64,24 @@ class OmplResult:
     clearance: float = 0.0  # [m] the clearance the plan kept (below the setting near an endpoint)
 
 
+@dataclass(frozen=True)
+class ArmPath:
+    """One arm's path with every other arm frozen (:func:`plan_arm_alone`)."""
+
+    waypoints: np.ndarray  # (W, dof) after shortcutting; no rows when none was found
+    plan_time: float  # [s]
+    blocked: str = ""  # "start" or "goal": that end is not a valid state (nothing searched)
+
+    @property
+    def solved(self) -> bool:
+        return len(self.waypoints) > 0
+
+    @property
+    def length(self) -> float:
+        """[rad] summed over the segments (L2 in joint space); 0 when none was found."""
+        return float(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1).sum())
+
+
 def _ompl() -> tuple[Any, Any, Any]:
     try:
         from ompl import base, geometric, util
@@ -70,6 +90,34 @@ def _ompl() -> tuple[Any, Any, Any]:
             "the OMPL baseline needs the PyPI package 'ompl' (pip install ompl==2.0.1)"
         ) from exc
     return base, geometric, util
+
+
+def _joint_space(ob: Any, low: np.ndarray, high: np.ndarray) -> Any:
+    """A real-vector state space bounded by ``low`` and ``high``."""
+    space = ob.RealVectorStateSpace(len(low))
+    bounds = ob.RealVectorBounds(len(low))
+    for i, (lo, hi) in enumerate(zip(low, high, strict=True)):
+        bounds.setLow(i, float(lo))
+        bounds.setHigh(i, float(hi))
+    space.setBounds(bounds)
+    return space
+
+
+def _limits(robot: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Planning bounds of one arm: its joint limits, continuous joints one turn either way."""
+    return np.maximum(robot.lower, -2.0 * np.pi), np.minimum(robot.upper, 2.0 * np.pi)
+
+
+def _state(space: Any, q: np.ndarray) -> Any:
+    state = space.allocState()
+    for i, v in enumerate(q):
+        state[i] = float(v)
+    return state
+
+
+def _path_rows(path: Any, n: int) -> np.ndarray:
+    """A geometric path's states as rows (W, n)."""
+    return np.array([[path.getState(k)[i] for i in range(n)] for k in range(path.getStateCount())])
 
 
 def plan_rrt_connect(
@@ -85,19 +133,11 @@ def plan_rrt_connect(
     ou.setLogLevel(ou.LogLevel.LOG_ERROR)
     if s.seed is not None:
         ou.RNG.setSeed(s.seed)
-    lows, highs, sizes = [], [], []
-    for arm in cell.arms:  # the joint limits (continuous joints: one turn either way)
-        lows.append(np.maximum(arm.robot.lower, -2.0 * np.pi))
-        highs.append(np.minimum(arm.robot.upper, 2.0 * np.pi))
-        sizes.append(arm.robot.dof)
-    low, high = np.concatenate(lows), np.concatenate(highs)
+    limits = [_limits(arm.robot) for arm in cell.arms]
+    sizes = [arm.robot.dof for arm in cell.arms]
+    low, high = (np.concatenate(side) for side in zip(*limits, strict=True))
     n = len(low)
-    space = ob.RealVectorStateSpace(n)
-    bounds = ob.RealVectorBounds(n)
-    for i in range(n):
-        bounds.setLow(i, float(low[i]))
-        bounds.setHigh(i, float(high[i]))
-    space.setBounds(bounds)
+    space = _joint_space(ob, low, high)
     own_world = world is None
     w = world if world is not None else CellWorld(cell)
     checks = [0]
@@ -135,10 +175,7 @@ def plan_rrt_connect(
                 raise InvalidValueError(
                     name, f"joints {outside.tolist()} must lie in the planning bounds", q.tolist()
                 )
-            state = space.allocState()
-            for i in range(n):
-                state[i] = float(q[i])
-            endpoints.append(state)
+            endpoints.append(_state(space, q))
         ss.setStartAndGoalStates(endpoints[0], endpoints[1])
         planner = og.RRTConnect(si)
         planner.setRange(s.step)
@@ -150,11 +187,71 @@ def plan_rrt_connect(
                 ss.simplifySolution()
             path = ss.getSolutionPath()
             path.interpolate(max(2, int(np.ceil(path.length() / s.step)) + 1))
-            rows = np.array(
-                [[path.getState(k)[i] for i in range(n)] for k in range(path.getStateCount())]
-            )
+            rows = _path_rows(path, n)
             waypoints = {a: r.T for a, r in configuration(rows.T).items()}  # (W, dof) each
         return OmplResult(waypoints, time.perf_counter() - t0, solved, checks[0], clearance)
+    finally:
+        if own_world:
+            w.close()
+
+
+def plan_arm_alone(
+    cell: Cell,
+    arm_id: str,
+    configuration: Mapping[str, np.ndarray],
+    goal: np.ndarray,
+    clearance: float,
+    time_limit: float = 2.0,
+    seed: int | None = 0,
+    world: CellWorld | None = None,
+) -> ArmPath:
+    """RRT-Connect for arm ``arm_id`` alone from ``configuration[arm_id]`` to ``goal``, every
+    other arm frozen where ``configuration`` poses it: a valid state keeps ``clearance`` [m] from
+    every other arm and is free of self-collision; motions are checked every 0.02 rad. The path
+    is shortcut; ``blocked`` names an end that is not valid (then nothing is searched)."""
+    if not clearance >= 0:
+        raise InvalidValueError("clearance", "must be >= 0 [m]", clearance)
+    if not time_limit > 0:
+        raise InvalidValueError("time_limit", "must be > 0 [s]", time_limit)
+    ob, og, ou = _ompl()
+    ou.setLogLevel(ou.LogLevel.LOG_ERROR)
+    if seed is not None:
+        ou.RNG.setSeed(seed)
+    robot = cell.arm(arm_id).robot
+    low, high = _limits(robot)
+    peers = [a for a in cell.arm_ids if a != arm_id]
+    own_world = world is None
+    w = world if world is not None else CellWorld(cell)
+
+    def fits(q: np.ndarray) -> bool:
+        w.set_joint_positions(arm_id, q)
+        far = all(w.distance(arm_id, p, clearance) >= clearance for p in peers)
+        return far and not w.self_collisions(arm_id)
+
+    t0 = time.perf_counter()
+    try:
+        w.set_configuration({a: np.asarray(configuration[a], float) for a in cell.arm_ids})
+        start = np.asarray(configuration[arm_id], float)
+        goal = np.asarray(goal, float)
+        none = np.zeros((0, robot.dof))
+        for name, q in (("start", start), ("goal", goal)):
+            if np.any((q < low) | (q > high)) or not fits(q):
+                return ArmPath(none, time.perf_counter() - t0, name)
+        space = _joint_space(ob, low, high)
+        ss = og.SimpleSetup(space)
+        ss.setStateValidityChecker(
+            lambda state: fits(np.array([state[i] for i in range(robot.dof)]))
+        )
+        ss.getSpaceInformation().setStateValidityCheckingResolution(0.02 / space.getMaximumExtent())
+        ss.setStartAndGoalStates(_state(space, start), _state(space, goal))
+        planner = og.RRTConnect(ss.getSpaceInformation())
+        planner.setRange(0.1)
+        ss.setPlanner(planner)
+        if not (ss.solve(time_limit) and ss.haveExactSolutionPath()):
+            return ArmPath(none, time.perf_counter() - t0)
+        ss.simplifySolution()
+        rows = _path_rows(ss.getSolutionPath(), robot.dof)
+        return ArmPath(rows, time.perf_counter() - t0)
     finally:
         if own_world:
             w.close()
