@@ -116,16 +116,22 @@ def test_evaluate_tasks_writes_rows_per_arm_count(tmp_path: Path) -> None:
     assert "Ha et al." in (out / "summary.md").read_text()
 
 
+def _two_arm_task(tmp_path: Path, planner: str, *options: str) -> dict:
+    """``nehmo evaluate --tasks`` on Ha et al.'s two-arm task 135011 with ``options``: the
+    summary it writes."""
+    tasks = tmp_path / "tasks"
+    tasks.mkdir()
+    shutil.copy(TASKS / "135011.json", tasks / "135011.json")
+    out = tmp_path / "out"
+    args = ["--tasks", str(tasks), "--planners", planner, "--out", str(out), "--no-progress"]
+    assert evaluate_main([*args, *options]) == 0
+    return json.loads((out / "summary.json").read_text())
+
+
 def test_tasks_run_under_an_actuator_model(tmp_path: Path) -> None:
     """``--actuators realistic`` reaches the task runner's simulator (it once failed every task:
     the simulator was built ideal), and the episodes record the model."""
-    tasks = tmp_path / "tasks"
-    tasks.mkdir()
-    shutil.copy(TASKS / "135011.json", tasks / "135011.json")  # 2 arms
-    out = tmp_path / "out"
-    args = ["--tasks", str(tasks), "--planners", "nehmo", "--out", str(out), "--no-progress"]
-    assert evaluate_main([*args, "--actuators", "realistic"]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = _two_arm_task(tmp_path, "nehmo", "--actuators", "realistic")
     assert summary["episode_settings"]["actuators"] == "realistic"
     row = summary["rows"][0]
     assert row["ours"]["episodes"] == 1 and not any(e["error"] for e in row["episodes"])
@@ -188,13 +194,7 @@ def test_a_resumed_task_run_runs_only_the_unfinished_tasks(
 def test_tasks_run_for_the_time_limit_given(tmp_path: Path) -> None:
     """``--time-limit`` reaches the task runner: no episode runs past it, and the summary's
     success rule states it."""
-    tasks = tmp_path / "tasks"
-    tasks.mkdir()
-    shutil.copy(TASKS / "135011.json", tasks / "135011.json")  # 2 arms
-    out = tmp_path / "out"
-    args = ["--tasks", str(tasks), "--planners", "naive", "--out", str(out), "--no-progress"]
-    assert evaluate_main([*args, "--time-limit", "0.5"]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = _two_arm_task(tmp_path, "naive", "--time-limit", "0.5")
     assert summary["episode_settings"]["time_limit"] == 0.5
     assert "within 0.5 s" in summary["success_rule"]
     assert all(e["end_time"] <= 0.5 + 1e-9 for e in summary["rows"][0]["episodes"])
