@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from stuck_reasons import RESULTS, episodes_by_row
 
-from nehmo_core.eval.episode_log import read_episode_log
+from nehmo_core.eval.episode_log import EpisodeLog, read_episode_log
 from nehmo_core.eval.metrics import goal_distance
 from nehmo_core.planning.baselines.ompl import plan_arm_alone
 
@@ -37,9 +37,8 @@ FAR, GAIN = 0.3, 0.1  # [rad]
 KINDS = ("straight", "detour", "goal blocked", "start blocked", "not found", "no stall")
 
 
-def first_stall(path: str) -> tuple[float, str, dict[str, np.ndarray], np.ndarray] | None:
+def first_stall(log: EpisodeLog) -> tuple[float, str, dict[str, np.ndarray], np.ndarray] | None:
     """``(time [s], arm, every arm's joints, the arm's goal)`` at an episode's first stall."""
-    log = read_episode_log(path)
     stamps = np.asarray(log.stamps, float) * 1e-9
     for t in np.arange(START, stamps[-1] - WINDOW, EVERY):
         k, k2 = (int(np.searchsorted(stamps, x)) for x in (t, t + WINDOW))
@@ -56,12 +55,12 @@ def first_stall(path: str) -> tuple[float, str, dict[str, np.ndarray], np.ndarra
 
 def probe(path: str, clearance: float, search: float) -> dict:
     """One stuck episode's first stall and what RRT-Connect finds from it."""
-    stall = first_stall(path)
+    log = read_episode_log(path)
+    stall = first_stall(log)
     if stall is None:
         return {"kind": "no stall"}
     t, arm, configuration, goal = stall
-    cell = read_episode_log(path).cell
-    found = plan_arm_alone(cell, arm, configuration, goal, clearance, search)
+    found = plan_arm_alone(log.cell, arm, configuration, goal, clearance, search)
     straight = float(np.linalg.norm(goal - configuration[arm]))
     if found.blocked:
         kind = f"{found.blocked} blocked"
@@ -69,8 +68,14 @@ def probe(path: str, clearance: float, search: float) -> dict:
         kind = "not found"
     else:
         kind = "straight" if found.length <= 1.01 * straight + 1e-6 else "detour"
-    return {"kind": kind, "t": round(t, 2), "arm": arm, "goal_error": round(straight, 3),
-            "length": round(found.length, 3), "search_s": round(found.plan_time, 3)}  # fmt: skip
+    return {
+        "kind": kind,
+        "t": round(t, 2),
+        "arm": arm,
+        "goal_error": round(straight, 3),
+        "length": round(found.length, 3),
+        "search_s": round(found.plan_time, 3),
+    }
 
 
 def main() -> int:

@@ -215,7 +215,7 @@ def _episode_overrides(args: argparse.Namespace) -> tuple[tuple[str, object], ..
     if args.actuators != "ideal":
         overrides.append(("actuators", args.actuators))
     if args.time_limit is not None:
-        overrides.append(("time_limit", float(args.time_limit)))
+        overrides.append(("time_limit", args.time_limit))
     return tuple(overrides)
 
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.robots.model import Cell
+from nehmo_core.robots.model import Cell, RobotModel
 
 __all__ = ["ArmPath", "OmplResult", "OmplSettings", "plan_arm_alone", "plan_rrt_connect"]
 
@@ -82,14 +82,19 @@ class ArmPath:
         return float(np.linalg.norm(np.diff(self.waypoints, axis=0), axis=1).sum())
 
 
-def _ompl() -> tuple[Any, Any, Any]:
+def _ompl(seed: int | None) -> tuple[Any, Any]:
+    """OMPL's ``base`` and ``geometric`` modules, its log quiet and its generator seeded with
+    ``seed`` (unless None; process-wide, see the module notes)."""
     try:
         from ompl import base, geometric, util
     except ImportError as exc:  # optional dependency
         raise NehmoError(
             "the OMPL baseline needs the PyPI package 'ompl' (pip install ompl==2.0.1)"
         ) from exc
-    return base, geometric, util
+    util.setLogLevel(util.LogLevel.LOG_ERROR)
+    if seed is not None:
+        util.RNG.setSeed(seed)
+    return base, geometric
 
 
 def _joint_space(ob: Any, low: np.ndarray, high: np.ndarray) -> Any:
@@ -103,7 +108,7 @@ def _joint_space(ob: Any, low: np.ndarray, high: np.ndarray) -> Any:
     return space
 
 
-def _limits(robot: Any) -> tuple[np.ndarray, np.ndarray]:
+def _limits(robot: RobotModel) -> tuple[np.ndarray, np.ndarray]:
     """Planning bounds of one arm: its joint limits, continuous joints one turn either way."""
     return np.maximum(robot.lower, -2.0 * np.pi), np.minimum(robot.upper, 2.0 * np.pi)
 
@@ -129,10 +134,7 @@ def plan_rrt_connect(
 ) -> OmplResult:
     """Plan all arms jointly from ``start`` to ``goal`` with RRT-Connect."""
     s = settings or OmplSettings()
-    ob, og, ou = _ompl()
-    ou.setLogLevel(ou.LogLevel.LOG_ERROR)
-    if s.seed is not None:
-        ou.RNG.setSeed(s.seed)
+    ob, og = _ompl(s.seed)
     limits = [_limits(arm.robot) for arm in cell.arms]
     sizes = [arm.robot.dof for arm in cell.arms]
     low, high = (np.concatenate(side) for side in zip(*limits, strict=True))
@@ -213,10 +215,7 @@ def plan_arm_alone(
         raise InvalidValueError("clearance", "must be >= 0 [m]", clearance)
     if not time_limit > 0:
         raise InvalidValueError("time_limit", "must be > 0 [s]", time_limit)
-    ob, og, ou = _ompl()
-    ou.setLogLevel(ou.LogLevel.LOG_ERROR)
-    if seed is not None:
-        ou.RNG.setSeed(seed)
+    ob, og = _ompl(seed)
     robot = cell.arm(arm_id).robot
     low, high = _limits(robot)
     peers = [a for a in cell.arm_ids if a != arm_id]
