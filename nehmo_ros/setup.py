@@ -25,6 +25,7 @@ setup(
     entry_points={
         "console_scripts": [
             "arm_planner = nehmo_ros.arm_planner:main",
+            "arm_planners = nehmo_ros.planner_group:main",
             "command_watchdog = nehmo_ros.command_watchdog:main",
             "lifecycle_manager = nehmo_ros.lifecycle_manager:main",
             "recorder = nehmo_ros.recorder:main",

@@ -49,12 +49,13 @@ import json
 import math
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
@@ -169,8 +170,13 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
     the command periods within 40 ± 5 ms, against 96-100 % this way: ``bench/ros_rate.py``.)
     """
 
-    def __init__(self) -> None:
-        super().__init__("arm_planner")
+    def __init__(
+        self, node_name: str = "arm_planner", own: Mapping[str, Any] | None = None
+    ) -> None:
+        # ``own``: parameters of this node alone, over the command line's (several arm nodes
+        # in one process: nehmo_ros.planner_group)
+        given = [Parameter(k, value=v) for k, v in (own or {}).items()]
+        super().__init__(node_name, parameter_overrides=given)
         refuse_renamed(
             self,
             {
@@ -392,7 +398,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
     def on_stop(self) -> None:
         """Active: command a stop once (if the middleware is still up); end the worker thread."""
         if not self.configured:
-            print("arm_planner: stopped (unconfigured)", flush=True)
+            print(f"{self.get_name()}: stopped (unconfigured)", flush=True)
             return
         if self.timer is not None:
             self.timer.cancel()
@@ -409,7 +415,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
             "fail_safes": c.fail_safes,
             "solver_errors": c.solver_errors,
         }
-        print(f"arm_planner: stopped; counts {json.dumps(counts)}", flush=True)
+        print(f"{self.get_name()}: stopped; counts {json.dumps(counts)}", flush=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -175,15 +175,16 @@ def settle_heap() -> None:
 
 def run_main(
     program: str,
-    build: Callable[[], Node],
+    build: Callable[[], Node | Sequence[Node]],
     argv: Sequence[str] | None,
     drain_s: float = 0.0,
     usage: str | None = None,
 ) -> int:
-    """Init rclpy, build the node, spin until SIGINT/SIGTERM, stop cleanly.
+    """Init rclpy, build the node (or nodes), spin until SIGINT/SIGTERM, stop cleanly.
 
-    ``build`` returns an :class:`rclpy.node.Node` subclass with an ``on_stop()`` method. After
-    the stop request the node spins ``drain_s`` more seconds (taking what is queued), then
+    ``build`` returns an :class:`rclpy.node.Node` subclass with an ``on_stop()`` method, or a
+    sequence of them spun by one executor (several nodes in one process). After the stop
+    request the nodes spin ``drain_s`` more seconds (taking what is queued), then each node's
     ``on_stop`` runs while the middleware is still up. ``-h``/``--help`` among the arguments
     before ``--ros-args`` prints ``usage`` (the node module's docstring) instead.
     """
@@ -202,7 +203,8 @@ def run_main(
             print(f"{program}: error: {_describe(err)}", file=sys.stderr, flush=True)
             return 2
         try:
-            node = build()
+            built = build()
+            nodes = [built] if isinstance(built, Node) else list(built)
         except NODE_ERRORS as err:
             print(f"{program}: error: {_describe(err)}", file=sys.stderr, flush=True)
             return 2
@@ -215,10 +217,15 @@ def run_main(
         if threading.current_thread() is threading.main_thread():
             for signum in (signal.SIGINT, signal.SIGTERM):
                 signal.signal(signum, on_signal)
-        executor.add_node(node)
+        for node in nodes:
+            executor.add_node(node)
         settle_heap()
         try:
-            while not stop.is_set() and rclpy.ok() and not getattr(node, "finished", False):
+            while (
+                not stop.is_set()
+                and rclpy.ok()
+                and not all(getattr(n, "finished", False) for n in nodes)
+            ):
                 executor.spin_once(timeout_sec=0.05)
             end = time.monotonic() + drain_s
             while rclpy.ok() and time.monotonic() < end:
@@ -226,10 +233,12 @@ def run_main(
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
         finally:
-            node.on_stop()  # type: ignore[attr-defined]
-            executor.remove_node(node)
+            for node in nodes:
+                node.on_stop()  # type: ignore[attr-defined]
+                executor.remove_node(node)
             executor.shutdown(timeout_sec=1.0)
-            node.destroy_node()
+            for node in nodes:
+                node.destroy_node()
         return 0
     finally:
         rclpy.try_shutdown()

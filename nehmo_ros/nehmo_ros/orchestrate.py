@@ -6,12 +6,13 @@
     orchestrate replay out/episode_000 --rate 2.0
 
 ``run``: for every episode of the scenario set it starts the ``recorder`` (waits until it
-records), one ``arm_planner`` per arm and the ``sim_bridge`` (simulated time on ``/clock``,
-every node with ``use_sim_time``), each as its own rclpy process, in a DDS domain of its own
-(``ROS_DOMAIN_ID``) kept on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``). The bridge
-starts the episode once every planner is up and exits when it ends; then planners and recorder
-get SIGINT (SIGKILL after a bounded wait). Every episode bag (``<out>/episode_NNN/``, rosbag2
-layout) is evaluated with
+records), one ``arm_planner`` per arm (with ``--planner-processes K``, the arms' planner nodes
+in K ``arm_planners`` processes instead: :mod:`.planner_group`) and the ``sim_bridge``
+(simulated time on ``/clock``, every node with ``use_sim_time``), each as its own rclpy
+process, in a DDS domain of its own (``ROS_DOMAIN_ID``) kept on this machine
+(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``). The bridge starts the episode once every
+planner is up and exits when it ends; then planners and recorder get SIGINT (SIGKILL after a
+bounded wait). Every episode bag (``<out>/episode_NNN/``, rosbag2 layout) is evaluated with
 :mod:`nehmo_core.eval.metrics` (the batch runner's metrics); the per-episode results and the
 aggregate (SR, CR, planning time, MPL) go to ``<out>/summary.json``. An episode whose node
 exits early (its error line is printed at once) or whose bag cannot be read counts as an
@@ -117,6 +118,13 @@ def build_parser() -> argparse.ArgumentParser:
         default="",
         help="run the nodes from a colcon install space (ros_ws/install)",
     )
+    run.add_argument(
+        "--planner-processes",
+        type=int,
+        default=0,
+        help="run the planners in this many processes, several nodes each (default 0: one "
+        "process per arm)",
+    )
     run.add_argument("--out", default="nehmo_runs", help="output directory")
     run.add_argument("--render", action="store_true", help="render the first episode")
     ev = sub.add_parser("evaluate", help="metrics of episode logs")
@@ -156,6 +164,7 @@ def _run(args: argparse.Namespace) -> int:
         real_time_factor=args.real_time_factor,
         domain_id=args.domain_id,
         install_space=args.install_space,
+        planner_processes=args.planner_processes,
     )
     summary = run_suite(scenario_file, _episodes(args.episodes, count), out_dir, settings)
     print(format_metrics(summary["metrics"]))

@@ -100,6 +100,7 @@ class Process:
 #: The console script of each node module: (package, executable).
 EXECUTABLES: dict[str, tuple[str, str]] = {
     "nehmo_ros.arm_planner": ("nehmo_ros", "arm_planner"),
+    "nehmo_ros.planner_group": ("nehmo_ros", "arm_planners"),
     "nehmo_ros.command_watchdog": ("nehmo_ros", "command_watchdog"),
     "nehmo_ros.lifecycle_manager": ("nehmo_ros", "lifecycle_manager"),
     "nehmo_ros.recorder": ("nehmo_ros", "recorder"),

@@ -43,7 +43,14 @@ from nehmo_ros.processes import (
 )
 from nehmo_ros.suite_settings import SuiteSettings
 
-__all__ = ["EpisodeRun", "error_line", "format_metrics", "run_episode", "run_suite"]
+__all__ = [
+    "EpisodeRun",
+    "error_line",
+    "format_metrics",
+    "planner_commands",
+    "run_episode",
+    "run_suite",
+]
 
 #: [s] between checks of the episode's processes
 POLL = 0.1
@@ -92,6 +99,49 @@ def _watch(procs: Sequence[Process], bridge: Process, budget: float) -> Process 
     return None
 
 
+def planner_commands(
+    kinds: dict[str, str], cell_ref: str, settings: SuiteSettings
+) -> list[tuple[str, list[str]]]:
+    """``(process name, argv)`` of the planner processes: one ``arm_planner`` per arm, or with
+    ``planner_processes`` k the arms dealt in order to k ``arm_planners`` groups. Every node
+    is named ``arm_planner_<id>`` and starts unconfigured (the lifecycle manager brings it up)."""
+    common = {"cell": cell_ref, "model": settings.model, "use_sim_time": True, "autostart": False}
+    extra = list(settings.extra_planner_args)
+    ids = list(kinds)
+    if not settings.planner_processes:
+        return [
+            (
+                f"planner_{a}",
+                node_command(
+                    "nehmo_ros.arm_planner",
+                    {"arm_id": a, "planner": kinds[a], **common},
+                    ["-r", f"__node:=arm_planner_{a}", *extra],
+                    settings.install_space,
+                ),
+            )
+            for a in ids
+        ]
+    k = min(settings.planner_processes, len(ids))
+    size = -(-len(ids) // k)
+    chunks = [ids[i : i + size] for i in range(0, len(ids), size)]
+    return [
+        (
+            f"planners_{i}",
+            node_command(
+                "nehmo_ros.planner_group",
+                {
+                    "arm_ids": "[" + ",".join(chunk) + "]",
+                    "planners": "/".join(kinds[a] for a in chunk),
+                    **common,
+                },
+                extra,
+                settings.install_space,
+            ),
+        )
+        for i, chunk in enumerate(chunks)
+    ]
+
+
 def run_episode(
     scenario_file: Path,
     episode: int,
@@ -137,17 +187,8 @@ def run_episode(
             reason = f"the recorder did not start: {error_line(recorder.output())}"
             codes["recorder"] = recorder.stop(settings.stop_timeout)
             return EpisodeRun(episode, log_path, EpisodeResult.failed(reason, kinds), codes, wall)
-        for arm_id, kind in kinds.items():
-            params = {"arm_id": arm_id, "cell": cell_ref, "planner": kind, "model": settings.model}
-            launch(
-                f"planner_{arm_id}",
-                node_command(
-                    "nehmo_ros.arm_planner",
-                    {**params, **sim, "autostart": False},
-                    ["-r", f"__node:=arm_planner_{arm_id}", *settings.extra_planner_args],
-                    settings.install_space,
-                ),
-            )
+        for name, argv in planner_commands(kinds, cell_ref, settings):
+            launch(name, argv)
         # the planners start unconfigured; the lifecycle manager configures, then activates them
         manager_argv = node_command(
             "nehmo_ros.lifecycle_manager",

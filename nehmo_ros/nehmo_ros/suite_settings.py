@@ -27,6 +27,9 @@ class SuiteSettings:
     #: when the CPUs are busy; the recorder's deep reader history absorbs its delays.
     recorder_nice: int = 10
     extra_planner_args: tuple[str, ...] = ()
+    #: Processes the planners run in: 0, one ``arm_planner`` per arm; k > 0, the arms dealt in
+    #: order to at most k ``arm_planners`` processes (several nodes per process, composition).
+    planner_processes: int = 0
     env: dict[str, str] = field(default_factory=dict)
     #: A colcon install space (``ros_ws/install``): the nodes then run as its executables after
     #: sourcing its ``setup.bash``, as a ROS user runs them; '' runs ``python -m <module>``.
@@ -38,6 +41,9 @@ class SuiteSettings:
         for name in ("time_limit", "physics_rate", "real_time_factor", "startup_timeout"):
             if not getattr(self, name) > 0:
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))
+        if self.planner_processes < 0:
+            rule = "must be >= 0 (0: one process per arm)"
+            raise InvalidValueError("planner_processes", rule, self.planner_processes)
         if self.domain_id is not None and not 0 <= self.domain_id <= 232:
             raise InvalidValueError("domain_id", "must lie in [0, 232]", self.domain_id)
         check_row_and_model(self.planner, self.model)

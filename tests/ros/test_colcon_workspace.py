@@ -25,7 +25,12 @@ def _in_install_space(install: Path, command: str) -> subprocess.CompletedProces
 
 @pytest.mark.parametrize(
     ("package", "executable"),
-    [("nehmo_ros", "arm_planner"), ("nehmo_ros", "recorder"), ("sim_bridge", "sim_bridge")],
+    [
+        ("nehmo_ros", "arm_planner"),
+        ("nehmo_ros", "arm_planners"),
+        ("nehmo_ros", "recorder"),
+        ("sim_bridge", "sim_bridge"),
+    ],
 )
 def test_the_install_space_has_each_node_executable(
     colcon_install: Path, package: str, executable: str
@@ -34,7 +39,7 @@ def test_the_install_space_has_each_node_executable(
     assert path.is_file()
     proc = _in_install_space(colcon_install, f'"{path}" --help')
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.startswith(f"`{executable}` node:"), proc.stdout[:200]
+    assert proc.stdout.startswith(f"`{executable}` node"), proc.stdout[:200]
 
 
 def test_sourced_setup_imports_the_installed_packages(colcon_install: Path) -> None:
@@ -141,6 +146,7 @@ def test_ros2_pkg_executables_lists_the_install_spaces_nodes(colcon_install: Pat
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.splitlines() == [
         "nehmo_ros arm_planner",
+        "nehmo_ros arm_planners",
         "nehmo_ros command_watchdog",
         "nehmo_ros lifecycle_manager",
         "nehmo_ros orchestrate",
