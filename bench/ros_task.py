@@ -10,17 +10,20 @@ planner nodes in k ``arm_planners`` processes (``orchestrate --planner-processes
 episode is evaluated from its bag as ``orchestrate`` does; per arm, the command periods at the
 planner (the wall-clock publish instants ``publish_wall_ns`` of its statuses) and at the
 recorder (receive times of its commands) are reported as percentiles and as the share within
-40 ± 5 ms (the first second left out), with the planners' missed deadlines and fail-safes.
-Results: ``bench/results/<name>.json`` and ``.md``.
+40 ± 5 ms (the first second left out), with the planners' missed deadlines and fail-safes, and
+the planner processes' peak memory (summed PSS) and CPU seconds from ``/proc``. Results:
+``bench/results/<name>.json`` and ``.md``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -41,12 +44,47 @@ def layout_name(processes: int, arms: int) -> str:
     return f"{k} process{'es' if k > 1 else ''} ({-(-arms // k)} nodes each at most)"
 
 
+class PlannerUsage(threading.Thread):
+    """Samples the planner processes (command lines naming the planner modules) every 0.5 s
+    from ``/proc``: the peak of their summed proportional set size (PSS: shared pages split
+    among the processes sharing them) and the CPU seconds (user + system) each used."""
+
+    MARKS = ("nehmo_ros.arm_planner", "nehmo_ros.planner_group")
+
+    def __init__(self) -> None:
+        super().__init__(daemon=True)
+        self.halt = threading.Event()
+        self.peak_pss_mb = 0.0
+        self.cpu_s: dict[int, float] = {}
+        self.tick = os.sysconf("SC_CLK_TCK")
+
+    def run(self) -> None:
+        while not self.halt.wait(0.5):
+            total_kb = 0
+            for pid in filter(str.isdigit, os.listdir("/proc")):
+                try:
+                    cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+                    if not any(m in cmd for m in self.MARKS):
+                        continue
+                    rollup = Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines()
+                    stat = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+                except OSError:
+                    continue  # ended meanwhile
+                total_kb += next(int(ln.split()[1]) for ln in rollup if ln.startswith("Pss:"))
+                self.cpu_s[int(pid)] = (int(stat[11]) + int(stat[12])) / self.tick
+            self.peak_pss_mb = max(self.peak_pss_mb, total_kb / 1024)
+
+
 def run(task: Path, out: Path, processes: int) -> dict[str, Any]:
     argv = [sys.executable, "-m", "nehmo_ros.orchestrate", "run", "--task", str(task)]
     argv += ["--planner-processes", str(processes), "--out", str(out)]
+    usage = PlannerUsage()
+    usage.start()
     start = time.monotonic()
     done = subprocess.run(argv, capture_output=True, text=True)
     wall = time.monotonic() - start
+    usage.halt.set()
+    usage.join()
     summary = json.loads((out / "summary.json").read_text())
     episode = summary["episodes"][0]
     arms = list(load_task(task).cell.arm_ids)
@@ -58,6 +96,9 @@ def run(task: Path, out: Path, processes: int) -> dict[str, Any]:
         "end_time": episode["end_time"],
         "process_exit_codes": episode["exit_codes"],
         "wall_seconds": round(wall, 1),
+        "planner_processes_seen": len(usage.cpu_s),
+        "planner_peak_pss_mb": round(usage.peak_pss_mb, 1),
+        "planner_cpu_seconds": round(sum(usage.cpu_s.values()), 1),
         "rmw": summary.get("rmw", ""),
         "per_arm": analyse(Path(episode["log"]), arms, skip_s=1.0),
     }
@@ -76,11 +117,14 @@ def markdown(result: dict[str, Any]) -> str:
         f"factor 1. `{result['command']}`. Runs in the order listed, one at a time.",
         "",
         "Share of each arm's command periods within 40 ± 5 ms (worst arm / median arm), at the "
-        "planner (publish instants) and at the recorder (receive instants):",
+        "planner (publish instants) and at the recorder (receive instants); the planner "
+        "processes' peak summed PSS and CPU seconds (user + system, start-up included) over the "
+        "run, sampled from `/proc` every 0.5 s:",
         "",
         "| planners in | run | outcome | end [s] | at planner worst / median | at recorder worst "
-        "/ median | worst arm p1 / p99 at planner [ms] | misses | fail-safes | exit codes |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "/ median | worst arm p1 / p99 at planner [ms] | misses | fail-safes | planners' peak "
+        "PSS [MB] | planners' CPU [s] | exit codes |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in runs:
         planner, recorder = _shares(r, "at_planner"), _shares(r, "at_recorder")
@@ -93,7 +137,7 @@ def markdown(result: dict[str, Any]) -> str:
             f"| {r['layout']} | {r['repeat']} | {r['outcome']} | {r['end_time']} | "
             f"{min(planner):.1f} / {np.median(planner):.1f} % | "
             f"{min(recorder):.1f} / {np.median(recorder):.1f} % | {q[1]} / {q[3]} | {misses} | "
-            f"{fails} | {codes} |"
+            f"{fails} | {r['planner_peak_pss_mb']:.0f} | {r['planner_cpu_seconds']:.0f} | {codes} |"
         )
     for r in runs:
         if r["repeat"] != 0:

@@ -22,6 +22,9 @@ from nehmo_core.sim.scenarios import sample_configuration
 # the module-scoped fixtures of the Opt tests, bound here under their names for pytest
 value_function = _opt_helpers.value_function
 model = _opt_helpers.model
+#: the paper's fail-safe, every joint at full speed (NeHMO's default stills the ones with a
+#: slope under a fifth of the largest: the deadband test below)
+SWEEP = UNHURRIED.override({"fail_safe.deadband": 0.0})
 
 
 class _Failing:
@@ -50,7 +53,7 @@ class _Slow:
     ("solver", "status"), [(_Failing(), "failed"), (_Crashing(), "failed (RuntimeError)")]
 )
 def test_fail_safe_fires_on_solver_failure(model, value_function, solver, status) -> None:
-    planner = NehmoPlanner(CELL, OWN, [model], UNHURRIED, solver=solver)
+    planner = NehmoPlanner(CELL, OWN, [model], SWEEP, solver=solver)
     q1, q2, goal = _near_contact(model, 6, 1)[0]
     result = planner.plan(q1, {PEER: q2}, goal)
     assert result.telemetry.fail_safe and result.telemetry.status == status
@@ -92,7 +95,7 @@ def test_a_solve_starts_at_the_last_solution_or_after_a_fail_safe_at_the_naive_s
 
 def test_fail_safe_fires_on_a_missed_deadline(model, value_function) -> None:
     planner = NehmoPlanner(
-        CELL, OWN, [model], PlannerSettings().override({"opt.deadline": 0.04}), solver=_Slow()
+        CELL, OWN, [model], SWEEP.override({"opt.deadline": 0.04}), solver=_Slow()
     )
     q1, q2, goal = _near_contact(model, 7, 1)[0]
     result = planner.plan(q1, {PEER: q2}, goal)
@@ -123,7 +126,7 @@ def test_fail_safe_deadband_stills_only_the_joints_that_barely_change_v(
 
 def test_fail_safe_picks_the_most_critical_of_several_peers(model) -> None:
     cell = load_cell("triple_ur5")
-    planner = NehmoPlanner(cell, "ur5_0", [model], UNHURRIED, solver=_Failing())
+    planner = NehmoPlanner(cell, "ur5_0", [model], SWEEP, solver=_Failing())
     rng = np.random.default_rng(8)
     robot = cell.arm("ur5_0").robot
     q = {a: sample_configuration(robot, rng) for a in cell.arm_ids}

@@ -17,7 +17,7 @@ def test_planner_settings_given_as_node_parameters_reach_the_planner() -> None:
         "hold.release:=0.25",
         "hold.bound:=0.3",
         "escape.enabled:=false",
-        "fail_safe.deadband:=0.2",
+        "fail_safe.deadband:=0.3",
     ]
     with in_process("arm_planner", [*BASE, *given]) as nodes:
         node = ArmPlannerNode()
@@ -27,7 +27,7 @@ def test_planner_settings_given_as_node_parameters_reach_the_planner() -> None:
             0.25,
             0.3,
             False,
-            0.2,
+            0.3,
         )
         assert isinstance(s.hold.release, float) and isinstance(s.escape.enabled, bool)
 

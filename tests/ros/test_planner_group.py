@@ -1,9 +1,10 @@
 """Several arm planners in one process (``arm_planners``, ``orchestrate --planner-processes``).
 
-A three-UR5 episode runs through the node suite with all three planner nodes in one process,
-each still its own node with its own topics, lifecycle and solve worker: the lifecycle manager
-brings up the three nodes by name, every arm is planned for every tick of the episode and the
-outcome is the batch runner's. Bad group parameters stop the process with one line.
+A dual-UR5 episode (the one of ``test_e2e_suite.py``, where the naive planner collides) runs
+through the node suite with both planner nodes in one process, each still its own node with its
+own topics, lifecycle and solve worker: the lifecycle manager brings up both nodes by name,
+every arm is planned for every tick of the episode and the outcome is the batch runner's. Bad
+group parameters stop the process with one line.
 """
 
 from __future__ import annotations
@@ -28,8 +29,8 @@ from nehmo_ros.suite import EpisodeRun, planner_commands
 from nehmo_ros.suite import run_episode as run_ros_episode
 from nehmo_ros.suite_settings import SuiteSettings
 
-CELL = load_cell("triple_ur5")
-SEED, INDEX = 0, 2
+CELL = load_cell("dual_ur5")
+SEED, INDEX = 0, 11
 
 
 def test_arms_are_dealt_in_order_to_the_planner_processes() -> None:
@@ -94,7 +95,7 @@ def grouped(scenario_file: Path) -> EpisodeRun:
     return run_ros_episode(scenario_file, INDEX, scenario_file.parent, settings)
 
 
-def test_three_planner_nodes_in_one_process_run_the_episode(grouped: EpisodeRun) -> None:
+def test_two_planner_nodes_in_one_process_run_the_episode(grouped: EpisodeRun) -> None:
     run = grouped
     assert run.error == "", run.error
     assert set(run.exit_codes) == {"recorder", "planners_0", "sim_bridge"}

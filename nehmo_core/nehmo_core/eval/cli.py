@@ -92,7 +92,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fail-safe-deadband",
         type=float,
         help="fail-safe joints with |dV/dq_j| below this share of the largest stay still "
-        "(default 0: the paper's fail-safe)",
+        "(default 0.2; 0: the paper's fail-safe)",
     )
     parser.add_argument(
         "--no-self-clearance",

@@ -1,9 +1,10 @@
 """The paper's fail-safe: the HJI optimal control ``u = ū·sign(∂V/∂q¹)`` of the most critical
 pair (the smallest ``V``), applied when Opt fails, is infeasible or misses its deadline.
 
-``deadband`` (settings ``fail_safe_deadband``; 0, the paper's, by default) keeps still the
-joints whose ``|∂V/∂q_j|`` is below that share of the largest: they change V little and sweeping
-them at full speed may fold the arm into itself.
+``deadband`` (setting ``fail_safe.deadband``: 0.2 by default, 0 in the ``paper`` preset) keeps
+still the joints whose ``|∂V/∂q_j|`` is below that share of the largest: they change V little,
+and sweeping them at full speed (the sign of a slope near zero) drives an arm off its goal or
+folds it into itself.
 """
 
 from __future__ import annotations

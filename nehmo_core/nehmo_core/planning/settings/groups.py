@@ -126,7 +126,7 @@ class FailSafeSettings:
     critical pair (``planning/opt/fail_safe.py``)."""
 
     deadband: float = setting(
-        0.0,
+        0.2,
         "joints whose |∂V/∂q_j| is below this share of the largest stay still (0: the paper's)",
         ge=0,
         lt=1,

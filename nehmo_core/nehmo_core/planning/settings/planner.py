@@ -44,6 +44,7 @@ PAPER_OPT: Mapping[str, Any] = types.MappingProxyType(
         "self_clearance.enabled": False,
         "escape.enabled": False,
         "joint_limits.enabled": False,
+        "fail_safe.deadband": 0.0,
     }
 )
 """What the paper's Opt leaves out of NeHMO's defaults (the ``paper`` preset, ``nehmo_paper``):
