@@ -182,3 +182,37 @@ class CellProbe:
         self.node.destroy_node()
         self.executor.shutdown(timeout_sec=1.0)
         self.rclpy.try_shutdown()
+
+
+#: The suite tests' end-to-end episode: dual UR5, scenario 11 of seed 0, where the naive planner
+#: collides 2.2 s in, so the arms must coordinate.
+E2E_CELL, E2E_SEED, E2E_INDEX = "dual_ur5", 0, 11
+
+
+def e2e_scenarios(directory: Path) -> Path:
+    """The end-to-end episode's scenario set, written to ``directory/scenarios.json``."""
+    from nehmo_core.robots import load_cell
+    from nehmo_core.sim.scenario_files import save_scenario_set
+    from nehmo_core.sim.scenarios import generate_scenario_set
+
+    scenarios = generate_scenario_set(load_cell(E2E_CELL), E2E_SEED, E2E_INDEX + 1)
+    return save_scenario_set(scenarios, directory / "scenarios.json")
+
+
+def e2e_batch_reference(scenario_file: Path) -> Any:
+    """The batch runner's run of the end-to-end episode with the synthetic models and no solve
+    cut short by load: what an orchestrated run of it is compared with."""
+    from nehmo_core.eval.episode import EpisodeSettings, run_episode
+    from nehmo_core.eval.planners import build_planners
+    from nehmo_core.planning.models.registry import ModelRegistry, parse_value_models
+    from nehmo_core.planning.settings import PlannerSettings
+    from nehmo_core.robots import load_cell
+    from nehmo_core.sim.scenario_files import load_scenario_set
+
+    cell = load_cell(E2E_CELL)
+    scenario = load_scenario_set(scenario_file).scenarios[E2E_INDEX]
+    registry = ModelRegistry(parse_value_models(["synthetic"]))
+    kinds = dict.fromkeys(cell.arm_ids, "nehmo")
+    unhurried = PlannerSettings().override({"opt.deadline": 3600.0})
+    planners = build_planners(cell, kinds, scenario, 0.04, registry, unhurried)
+    return run_episode(cell, scenario, planners, EpisodeSettings(), kinds=kinds)

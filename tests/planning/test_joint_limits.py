@@ -76,9 +76,13 @@ def _dual_panda_scenario_14(settings: PlannerSettings) -> list:
 def test_the_panda_hand_keeps_off_its_base_at_a_joint_limit() -> None:
     settings = PlannerSettings().override({"opt.deadline": 3600.0})
     assert not _dual_panda_scenario_14(settings)
-    # without the stage the self-clearance check predicts a joint-2 motion the arm never makes
-    # (with the Panda models of 2026-11-29: the hand grazes the base at 5.76 s)
-    off = _dual_panda_scenario_14(settings.override({"joint_limits.enabled": False}))
+    # the fail-safe that drove joint 2 into its limit is the paper's, every joint at full speed
+    # (the default deadband keeps that joint still here): with it, the stage keeps the hand off
+    # the base; without the stage the self-clearance check predicts a joint-2 motion the arm
+    # never makes (with the Panda models of 2026-11-29: the hand grazes the base at 5.76 s)
+    sweep = settings.override({"fail_safe.deadband": 0.0})
+    assert not _dual_panda_scenario_14(sweep)
+    off = _dual_panda_scenario_14(sweep.override({"joint_limits.enabled": False}))
     assert any(c.arm_a == c.arm_b == "panda_0" for c in off)
 
 

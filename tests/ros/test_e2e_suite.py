@@ -21,28 +21,29 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from _ros_testutil import DOMAIN_ID, finish, start
+from _ros_testutil import (
+    DOMAIN_ID,
+    E2E_CELL,
+    E2E_INDEX,
+    e2e_batch_reference,
+    e2e_scenarios,
+    finish,
+    start,
+)
 
-from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.metrics import EpisodeResult
-from nehmo_core.eval.planners import build_planners
-from nehmo_core.planning.models.registry import ModelRegistry, parse_value_models
-from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenario_files import save_scenario_set
-from nehmo_core.sim.scenarios import generate_scenario_set
 from nehmo_ros.suite import EpisodeRun
 from nehmo_ros.suite import run_episode as run_ros_episode
 from nehmo_ros.suite_settings import SuiteSettings
 
-CELL = load_cell("dual_ur5")
-SEED, INDEX = 0, 11
+CELL = load_cell(E2E_CELL)
+INDEX = E2E_INDEX
 
 
 @pytest.fixture(scope="module")
 def scenario_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    scenarios = generate_scenario_set(CELL, SEED, INDEX + 1)
-    return save_scenario_set(scenarios, tmp_path_factory.mktemp("e2e") / "scenarios.json")
+    return e2e_scenarios(tmp_path_factory.mktemp("e2e"))
 
 
 @pytest.fixture(scope="module")
@@ -96,16 +97,7 @@ def test_the_nodes_ran_from_the_install_space(suite: Any, colcon_install: Path) 
 
 @pytest.fixture(scope="module")
 def batch(scenario_file: Path) -> EpisodeResult:
-    from nehmo_core.sim.scenario_files import load_scenario_set
-
-    scenario = load_scenario_set(scenario_file).scenarios[INDEX]
-    registry = ModelRegistry(parse_value_models(["synthetic"]))
-    kinds = dict.fromkeys(CELL.arm_ids, "nehmo")
-    unhurried = PlannerSettings().override(
-        {"opt.deadline": 3600.0}
-    )  # the reference: no solve cut short by load
-    planners = build_planners(CELL, kinds, scenario, 0.04, registry, unhurried)
-    return run_episode(CELL, scenario, planners, EpisodeSettings(), kinds=kinds)
+    return e2e_batch_reference(scenario_file)
 
 
 def test_both_arms_reach_their_goals_without_collision(suite: Any) -> None:

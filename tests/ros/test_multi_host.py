@@ -27,13 +27,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from _netns import Host, hosts, own_namespaces, require_netns
-from _ros_testutil import DOMAIN_ID, child_env
+from _ros_testutil import DOMAIN_ID, E2E_CELL, E2E_INDEX, child_env, e2e_scenarios
 
 from nehmo_core.eval.metrics import EpisodeResult, evaluate_log
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set
-from nehmo_core.sim.scenarios import Scenario, generate_scenario_set, goal_error
+from nehmo_core.sim.scenario_files import load_scenario_set
+from nehmo_core.sim.scenarios import Scenario, goal_error
 from nehmo_ros.processes import Process, node_command
 from nehmo_ros.suite import EpisodeRun, run_episode
 from nehmo_ros.suite_settings import SuiteSettings
@@ -45,8 +45,8 @@ def _network_namespaces() -> None:
     require_netns("multi-host test")
 
 
-CELL = load_cell("dual_ur5")
-SEED, INDEX = 0, 11
+CELL = load_cell(E2E_CELL)
+INDEX = E2E_INDEX
 TIME_LIMIT = 20.0  # [s] simulated
 STARTUP_TIMEOUT = 240.0  # [s] generous: a loaded CI machine starts processes slowly
 STOP_TIMEOUT = 10.0  # [s] after SIGINT before SIGKILL
@@ -153,8 +153,7 @@ def run_on_hosts(scenario_file: Path, out_dir: Path) -> MultiHostRun:
 
 @pytest.fixture(scope="module")
 def scenario_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    scenarios = generate_scenario_set(CELL, SEED, INDEX + 1)
-    return save_scenario_set(scenarios, tmp_path_factory.mktemp("multi_host") / "scenarios.json")
+    return e2e_scenarios(tmp_path_factory.mktemp("multi_host"))
 
 
 @pytest.fixture(scope="module")

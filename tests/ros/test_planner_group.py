@@ -14,23 +14,24 @@ import sys
 from pathlib import Path
 
 import pytest
-from _ros_testutil import DOMAIN_ID, child_env
+from _ros_testutil import (
+    DOMAIN_ID,
+    E2E_CELL,
+    E2E_INDEX,
+    child_env,
+    e2e_batch_reference,
+    e2e_scenarios,
+)
 
 from nehmo_core.errors import InvalidValueError
-from nehmo_core.eval.episode import EpisodeSettings, run_episode
-from nehmo_core.eval.planners import build_planners
-from nehmo_core.planning.models.registry import ModelRegistry, parse_value_models
-from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots import load_cell
-from nehmo_core.sim.scenario_files import load_scenario_set, save_scenario_set
-from nehmo_core.sim.scenarios import generate_scenario_set
 from nehmo_ros.planner_group import group_members
 from nehmo_ros.suite import EpisodeRun, planner_commands
 from nehmo_ros.suite import run_episode as run_ros_episode
 from nehmo_ros.suite_settings import SuiteSettings
 
-CELL = load_cell("dual_ur5")
-SEED, INDEX = 0, 11
+CELL = load_cell(E2E_CELL)
+INDEX = E2E_INDEX
 
 
 def test_arms_are_dealt_in_order_to_the_planner_processes() -> None:
@@ -79,8 +80,7 @@ def test_a_bad_node_parameter_names_the_arm_in_one_line() -> None:
 
 @pytest.fixture(scope="module")
 def scenario_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    scenarios = generate_scenario_set(CELL, SEED, INDEX + 1)
-    return save_scenario_set(scenarios, tmp_path_factory.mktemp("group") / "scenarios.json")
+    return e2e_scenarios(tmp_path_factory.mktemp("group"))
 
 
 @pytest.fixture(scope="module")
@@ -115,10 +115,5 @@ def test_two_planner_nodes_in_one_process_run_the_episode(grouped: EpisodeRun) -
 def test_the_grouped_episode_ends_as_the_batch_runner_does(
     grouped: EpisodeRun, scenario_file: Path
 ) -> None:
-    scenario = load_scenario_set(scenario_file).scenarios[INDEX]
-    registry = ModelRegistry(parse_value_models(["synthetic"]))
-    kinds = dict.fromkeys(CELL.arm_ids, "nehmo")
-    unhurried = PlannerSettings().override({"opt.deadline": 3600.0})
-    planners = build_planners(CELL, kinds, scenario, 0.04, registry, unhurried)
-    batch = run_episode(CELL, scenario, planners, EpisodeSettings(), kinds=kinds)
+    batch = e2e_batch_reference(scenario_file)
     assert batch.outcome == grouped.result.outcome == "success"
