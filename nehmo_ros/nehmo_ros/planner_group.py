@@ -28,17 +28,13 @@ from rclpy.node import Node
 from nehmo_core.errors import InvalidValueError, NehmoError
 from nehmo_ros.arm_planner import ArmPlannerNode
 from nehmo_ros.node_support import NODE_ERRORS, Param, declare_parameters, run_main
+from nehmo_ros.processes import planner_node_name
 
 PROGRAM = "arm_planners"
 GROUP_PARAMS: dict[str, Param] = {
     "arm_ids": Param([""], "ids of the arms this process plans for, one node each"),
     "planners": Param("", "one planner kind per arm joined by '/' ('': the planner parameter)"),
 }
-
-
-def node_name(arm_id: str) -> str:
-    """The node name of arm ``arm_id``'s planner (as ``orchestrate`` names a lone one)."""
-    return f"arm_planner_{arm_id}"
 
 
 def group_members(arm_ids: Sequence[str], planners: str) -> dict[str, dict[str, str]]:
@@ -74,7 +70,7 @@ def build_group() -> list[Node]:
     nodes: list[Node] = [group]
     for arm_id, own in group.members.items():
         try:
-            nodes.append(ArmPlannerNode(node_name(arm_id), own))
+            nodes.append(ArmPlannerNode(planner_node_name(arm_id), own))
         except NODE_ERRORS as err:
             raise NehmoError(f"arm {arm_id!r}: {err}") from None
     return nodes

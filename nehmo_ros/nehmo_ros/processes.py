@@ -24,6 +24,7 @@ __all__ = [
     "child_env",
     "isolated_domain",
     "node_command",
+    "planner_node_name",
     "reported_rmw",
     "started_processes",
 ]
@@ -95,6 +96,12 @@ class Process:
                 killed = True
         self._out.close()
         return None if killed else self.proc.returncode
+
+
+def planner_node_name(arm_id: str) -> str:
+    """The node name of arm ``arm_id``'s planner, alone in its process or in a group (the
+    lifecycle manager brings it up by this name)."""
+    return f"arm_planner_{arm_id}"
 
 
 #: The console script of each node module: (package, executable).

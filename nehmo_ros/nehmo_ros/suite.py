@@ -38,6 +38,7 @@ from nehmo_ros.processes import (
     child_env,
     isolated_domain,
     node_command,
+    planner_node_name,
     reported_rmw,
     started_processes,
 )
@@ -115,7 +116,7 @@ def planner_commands(
                 node_command(
                     "nehmo_ros.arm_planner",
                     {"arm_id": a, "planner": kinds[a], **common},
-                    ["-r", f"__node:=arm_planner_{a}", *extra],
+                    ["-r", f"__node:={planner_node_name(a)}", *extra],
                     settings.install_space,
                 ),
             )
@@ -193,7 +194,7 @@ def run_episode(
         manager_argv = node_command(
             "nehmo_ros.lifecycle_manager",
             {
-                "node_names": [f"arm_planner_{a}" for a in kinds],
+                "node_names": [planner_node_name(a) for a in kinds],
                 "timeout": settings.startup_timeout,
             },
             install_space=settings.install_space,
