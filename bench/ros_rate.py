@@ -55,6 +55,7 @@ def period_stats(periods_ms: np.ndarray) -> dict[str, Any]:
 def analyse(log: Path, arm_ids: list[str], skip_s: float) -> dict[str, Any]:
     """Per-arm period statistics from the log (the first ``skip_s`` seconds left out)."""
     publish: dict[str, list[int]] = {a: [] for a in arm_ids}
+    ticks: dict[str, list[int]] = {a: [] for a in arm_ids}  # the node clock at each tick
     receive: dict[str, list[int]] = {a: [] for a in arm_ids}
     last_status: dict[str, dict[str, str]] = {}
     for rec in iter_log(log):
@@ -66,6 +67,8 @@ def analyse(log: Path, arm_ids: list[str], skip_s: float) -> dict[str, Any]:
         elif rec.topic.endswith("/planner/status") and isinstance(rec.message, DiagnosticStatus):
             values = {kv.key: kv.value for kv in rec.message.values}
             publish[arm].append(int(values["publish_wall_ns"]))
+            if "tick_ns" in values:  # statuses of older planners lack it
+                ticks[arm].append(int(values["tick_ns"]))
             last_status[arm] = values
     out: dict[str, Any] = {}
     for a in arm_ids:
@@ -74,6 +77,15 @@ def analyse(log: Path, arm_ids: list[str], skip_s: float) -> dict[str, Any]:
             t = np.sort(np.asarray(stamps, dtype=np.int64))
             t = t[t >= t[0] + skip_s * 1e9] if len(t) else t
             stats[name] = period_stats(np.diff(t) / 1e6)
+        if len(ticks[a]) == len(publish[a]) > 2:
+            # the same ticks on the node clock (simulated time under use_sim_time), and how
+            # fast that clock ran against the wall clock over them
+            sim, wall = np.asarray(ticks[a], dtype=np.int64), np.asarray(publish[a], np.int64)
+            keep = wall >= wall.min() + skip_s * 1e9
+            sim, wall = sim[keep], wall[keep]
+            stats["at_planner_node_clock"] = period_stats(np.diff(np.sort(sim)) / 1e6)
+            if len(sim) > 1 and wall.max() > wall.min():
+                stats["clock_rate"] = round(float(np.ptp(sim) / np.ptp(wall)), 4)
         values = last_status.get(a, {})
         stats["ticks"] = int(values.get("ticks", 0))
         stats["deadline_misses"] = int(values.get("deadline_misses", 0))
@@ -163,10 +175,13 @@ def markdown(result: dict[str, Any]) -> str:
 
 
 def period_rows(per_arm: dict[str, Any]) -> list[str]:
-    """Markdown table rows of :func:`analyse`'s per-arm statistics (planner, then recorder)."""
+    """Markdown table rows of :func:`analyse`'s per-arm statistics (planner in wall time, planner
+    on its node clock, recorder)."""
     rows = []
     for arm, stats in per_arm.items():
-        for where in ("at_planner", "at_recorder"):
+        for where in ("at_planner", "at_planner_node_clock", "at_recorder"):
+            if where not in stats:
+                continue
             s = stats[where]
             rows.append(
                 f"| {arm} | {where} | {s.get('count', 0)} | {s.get('within_40pm5_pct', 0):.2f} %"

@@ -372,7 +372,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
         period, wall_ns = self._sent
         if self.controller.announces:  # a planner that announces nothing stays silent
             self.bound_pub.publish(Float64(data=self.controller.announcement))
-        status = self._status(decision, period, wall_ns)
+        status = self._status(decision, period, wall_ns, stamp_ns)
         self.status_pub.publish(log_msgs.serialize(status))
         self.published["statuses"] += 1
         self._publish_diagnostics(status, stamp_ns)

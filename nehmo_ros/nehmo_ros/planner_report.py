@@ -79,8 +79,9 @@ class PlannerReports:
                 throttle_duration_sec=WARN_EVERY,
             )
 
-    def _status(self, d: Decision, period: float, wall_ns: int) -> Any:
-        """The evaluation's status message (telemetry) plus the node's own counters."""
+    def _status(self, d: Decision, period: float, wall_ns: int, tick_ns: int = 0) -> Any:
+        """The evaluation's status message (telemetry) plus the node's own counters;
+        ``tick_ns`` is the node clock at the tick (simulated time under ``use_sim_time``)."""
         msg = status_message(self.arm_id, self.kind, self.controller.telemetry(d), d.observation_ns)
         c = self.controller.counters
         extra: dict[str, object] = {
@@ -98,6 +99,7 @@ class PlannerReports:
             "state_jumps": sum(self.controller.states.jumps.values()),
             "period": repr(period),
             "publish_wall_ns": wall_ns,
+            "tick_ns": tick_ns,
             "command": ",".join(repr(float(u)) for u in d.velocity),
             "late_solve_time": repr(float(d.late_solve_time)),
             "late_solve_tick": d.late_tick,

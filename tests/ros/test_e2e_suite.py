@@ -20,6 +20,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from _ros_testutil import (
     DOMAIN_ID,
@@ -187,3 +188,22 @@ def test_the_bag_holds_each_planners_markers(suite: Any) -> None:
         assert lines >= 1, arm_id  # the peer is in reach: the line is drawn
         values = read_log(run.log, topics=[f"/{arm_id}/planner/min_value"])
         assert len(values) >= 5 and any(math.isfinite(r.message.data) for r in values)
+
+
+def test_statuses_carry_each_ticks_simulated_time(suite: Any) -> None:
+    """``tick_ns`` is the planner's node clock at the tick: simulated time (the bridge's /clock,
+    100 Hz steps), one timer period (40 ms) apart whenever no tick was skipped."""
+    from nehmo_core.logs.reader import read_log
+
+    run, _ = suite
+    for arm_id in ("ur5_0", "ur5_1"):
+        records = read_log(run.log, topics=[f"/{arm_id}/planner/status"])
+        ticks = [
+            int(next(kv.value for kv in r.message.values if kv.key == "tick_ns")) for r in records
+        ]
+        assert len(ticks) > 50, arm_id
+        assert (np.diff(ticks) > 0).all(), arm_id  # one status per tick
+        assert all(t % 10_000_000 == 0 for t in ticks), arm_id  # on the simulated clock's steps
+        periods = np.diff(ticks)
+        assert int(np.median(periods)) == 40_000_000, arm_id
+        assert ticks[-1] <= run.result.end_time * 1e9 + 1e8, arm_id  # simulated, not wall time
