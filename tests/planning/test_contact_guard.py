@@ -61,15 +61,18 @@ def test_the_guard_parts_arms_that_start_in_contact(registry: ModelRegistry) -> 
     assert _inter_arm(PlannerSettings().contact.clearance, registry) == []
 
 
-def _planner(registry: ModelRegistry) -> NehmoPlanner:
-    settings = PlannerSettings().override(UNHURRIED)
+def _planner(registry: ModelRegistry, **overrides: float) -> NehmoPlanner:
+    settings = PlannerSettings().override({**UNHURRIED, **overrides})
     return NehmoPlanner(CELL, A, registry.models_for("nehmo", CELL), settings)
 
 
-def _guarded(planner: NehmoPlanner, q: np.ndarray, peer: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """The contact guard's command instead of ``u`` with the arm at ``q``, its peer at ``peer``."""
+def _guarded(
+    planner: NehmoPlanner, q: np.ndarray, peer: np.ndarray, u: np.ndarray, bound: float = 1.0
+) -> np.ndarray:
+    """The contact guard's command instead of ``u`` with the arm at ``q``, its peer at ``peer``
+    (announcing ``bound``, a share of full speed)."""
     guard = next(f for f in planner._filters if f.name == "contact")
-    tick = read_tick(planner, q, {B: peer}, SCENARIO.goal[A], {B: 1.0}, None)
+    tick = read_tick(planner, q, {B: peer}, SCENARIO.goal[A], {B: bound}, {B: bound})
     tick.rows = planner.rows(q)
     return guard.filter(tick, planner.current(tick.q, tick.peers, tick.bounds), u)
 
@@ -104,3 +107,40 @@ def test_settings_are_checked_and_off_in_the_paper_preset() -> None:
     assert PlannerSettings.preset("paper").contact.clearance == 0.0
     with pytest.raises(InvalidValueError, match=r"contact\.clearance"):
         PlannerSettings().override({"contact.clearance": -0.01})
+
+
+def test_a_holding_peer_keeps_the_holding_clearance(registry: ModelRegistry) -> None:
+    """From the start 13 mm apart, random commands: against a peer that holds (bound 0.2) a
+    step may close the gap down to ``holding_clearance`` (1 cm) but never below it, where
+    against a full-speed peer no step closes it at all."""
+    planner = _planner(registry, **{"contact.holding_clearance": 0.01})
+    rng = np.random.default_rng(5)
+    q, peer = SCENARIO.start[A], SCENARIO.start[B]
+    t = planner.settings.opt.t_plan
+    closer = 0
+    with CellWorld(CELL) as world:
+        world.set_configuration({A: q, B: peer})
+        now = world.distance(A, B)
+        assert 0.01 < now < planner.settings.contact.clearance
+        for _ in range(16):
+            u = rng.uniform(-0.5, 0.5, CELL.arm(A).robot.dof)
+            for bound in (0.2, 1.0):
+                out = _guarded(planner, q, peer, u, bound)
+                world.set_joint_positions(A, q + t * out)
+                end = world.distance(A, B)
+                if bound < 1.0:
+                    assert end >= 0.01 - 1e-9
+                    closer += end < now - 1e-4
+                else:
+                    assert end >= now - 1e-9
+    assert closer > 0  # some steps toward the holding peer are let through
+
+
+def test_the_holding_clearance_is_at_most_the_clearance(registry: ModelRegistry) -> None:
+    """A holding clearance above the clearance acts as the clearance: the guard against a
+    holding peer then matches the guard against a full-speed one."""
+    planner = _planner(registry, **{"contact.holding_clearance": 0.5})
+    u = np.full(CELL.arm(A).robot.dof, 0.4)
+    q, peer = SCENARIO.start[A], SCENARIO.start[B]
+    held, free = _guarded(planner, q, peer, u, 0.2), _guarded(planner, q, peer, u, 1.0)
+    assert np.array_equal(held, free)

@@ -117,6 +117,17 @@ class ContactSettings:
         ge=0,
         le=1,
     )
+    # a holding peer moves at most hold.bound·d̄: the exact guard's gap suffices against it, and
+    # 4 cm kept arriving arms from goals beside settled ones (five UR5s, development seed 31:
+    # 83 → 89 % SR)
+    holding_clearance: float = setting(
+        0.01,
+        "the clearance against a peer that holds (announced a bound below full speed); at most "
+        "clearance",
+        "m",
+        ge=0,
+        le=1,
+    )
     # two UR5s closing at full speed cover 3 cm in a tick: a gap just above the clearance
     # went to contact in two ticks (seven UR5s, tasks seed 78, gen_7arm_s78_049)
     approach: float = setting(

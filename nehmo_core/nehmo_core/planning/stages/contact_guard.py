@@ -15,9 +15,12 @@ one another's margins the paper's fail-safe, which looks only at the most critic
 also step into another one.
 
 The guard checks, with PyBullet, every peer whose V reads below ``contact.value``, each on its
-own: a peer closer than ``contact.clearance + contact.approach`` is watched, and the step (end
+own: a peer closer than its clearance plus ``contact.approach`` is watched, and the step (end
 and midpoint, the peers posed where they are now) may bring no watched peer closer than it is
-now, nor within ``contact.clearance``. A step that would is shortened (``contact.scales``: ½,
+now, nor within its clearance. The clearance is ``contact.clearance``, or
+``contact.holding_clearance`` (the smaller) against a peer that holds: one that announced a
+bound below full speed moves at most ``hold.bound·d̄`` and cannot close a gap as two arms at
+full speed do. A step that would is shortened (``contact.scales``: ½,
 ¼); if none fits it is replaced by ``cap·ū·g/max|g|`` along the gradient ``g`` of the real
 distance to the nearest watched peer over this arm's joints (central differences of
 ``contact.probe`` rad), else along the sum of the watched peers' unit gradients, kept within
@@ -32,9 +35,11 @@ from collections.abc import Mapping
 import numpy as np
 
 from nehmo_core.geometry.pybullet_world import CellWorld
+from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.problem import project_step
 from nehmo_core.planning.opt.tick import PeerValues, Tick
+from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.planning.stages.exact_guard import WorldFilter
 
 __all__ = ["ContactGuard", "contact_step"]
@@ -82,6 +87,13 @@ def _gradient(
     return grad
 
 
+def _clearance(s: PlannerSettings, tick: Tick, peer: str) -> float:
+    """The real distance [m] below which no step may close on ``peer``."""
+    if peer in tick.participants and tick.bounds.get(peer, FULL_SPEED) < FULL_SPEED:
+        return min(s.contact.clearance, s.contact.holding_clearance)
+    return s.contact.clearance
+
+
 def contact_step(
     world: CellWorld, host: Host, tick: Tick, u: np.ndarray, near: Mapping[str, np.ndarray]
 ) -> tuple[np.ndarray, bool]:
@@ -89,17 +101,20 @@ def contact_step(
     and whether it differs from ``u``."""
     s, arm_id, q = host.settings, host.arm_id, tick.q
     world.set_configuration(near)
-    clearance = s.contact.clearance
+    # a peer that holds (announced a bound below full speed) closes the gap slower: it keeps
+    # ``holding_clearance``
+    clearance = np.array([_clearance(s, tick, p) for p in near])
     watch = clearance + s.contact.approach
-    now = _distances(world, arm_id, q, list(near), watch + 0.01)
-    if now.min() >= watch:
+    now = _distances(world, arm_id, q, list(near), float(watch.max()) + 0.01)
+    inside = now < watch
+    if not inside.any():
         return u, False
     # each watched peer on its own: a step may not end (or pass) closer to it than it is now,
-    # nor within ``clearance`` of it (a step that eased the nearest peer while closing on the
+    # nor within its clearance (a step that eased the nearest peer while closing on the
     # next let three arms in one another's margins touch)
-    peers = [p for p, d in zip(near, now, strict=True) if d < watch]
-    gaps = now[now < watch]
-    floors = np.minimum(gaps, clearance)
+    peers = [p for p, watched in zip(near, inside, strict=True) if watched]
+    gaps = now[inside]
+    floors = np.minimum(gaps, clearance[inside])
     t = s.opt.t_plan
     share = _fits(world, arm_id, q, u * t, peers, floors, s.contact.scales)
     if share >= 1.0:
