@@ -67,3 +67,8 @@ class Tick:
     rows: LinearRows | None = None
     steered_by: str | None = None
     fail_safe: bool = False  # Opt gave no step this tick: the fail-safe command ran
+
+    def holds(self, peer: str) -> bool:
+        """Whether ``peer`` holds: it takes part in the announcements and announced a bound
+        below full speed."""
+        return peer in self.participants and self.bounds.get(peer, FULL_SPEED) < FULL_SPEED

@@ -35,7 +35,6 @@ from collections.abc import Mapping
 import numpy as np
 
 from nehmo_core.geometry.pybullet_world import CellWorld
-from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.problem import project_step
 from nehmo_core.planning.opt.tick import PeerValues, Tick
@@ -89,7 +88,7 @@ def _gradient(
 
 def _clearance(s: PlannerSettings, tick: Tick, peer: str) -> float:
     """The real distance [m] below which no step may close on ``peer``."""
-    if peer in tick.participants and tick.bounds.get(peer, FULL_SPEED) < FULL_SPEED:
+    if tick.holds(peer):
         return min(s.contact.clearance, s.contact.holding_clearance)
     return s.contact.clearance
 

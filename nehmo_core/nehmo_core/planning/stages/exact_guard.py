@@ -26,7 +26,6 @@ import numpy as np
 
 from nehmo_core.geometry.pybullet_world import CellWorld
 from nehmo_core.geometry.world_pool import WORLDS, Lease
-from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.planning.settings import PlannerSettings
@@ -118,9 +117,7 @@ class ExactGuard(WorldFilter):
             return u
         near_v = host.settings.exact_guard.near
         near = [p for p, v in zip(now.ids, now.values, strict=True) if v < near_v]
-        held = {
-            p: tick.peers[p] for p in near if p in tick.participants and tick.bounds[p] < FULL_SPEED
-        }
+        held = {p: tick.peers[p] for p in near if tick.holds(p)}
         share = guard_step(self._lease.world, host.arm_id, tick.q, u, held, host.settings)
         self.shortened += share < 1.0
         return u * share
