@@ -192,7 +192,9 @@ def test_the_bag_holds_each_planners_markers(suite: Any) -> None:
 
 def test_statuses_carry_each_ticks_simulated_time(suite: Any) -> None:
     """``tick_ns`` is the planner's node clock at the tick: simulated time (the bridge's /clock,
-    100 Hz steps), one timer period (40 ms) apart whenever no tick was skipped."""
+    100 Hz steps), one timer period (40 ms) apart whenever no tick was skipped. When the simulated
+    clock jumps by more than a period (the bridge's first steps), the timer runs the ticks it owes
+    at once, so consecutive ticks may read the same clock; they never read it going backwards."""
     from nehmo_core.logs.reader import read_log
 
     run, _ = suite
@@ -202,7 +204,7 @@ def test_statuses_carry_each_ticks_simulated_time(suite: Any) -> None:
             int(next(kv.value for kv in r.message.values if kv.key == "tick_ns")) for r in records
         ]
         assert len(ticks) > 50, arm_id
-        assert (np.diff(ticks) > 0).all(), arm_id  # one status per tick
+        assert (np.diff(ticks) >= 0).all(), arm_id  # the clock never runs backwards
         assert all(t % 10_000_000 == 0 for t in ticks), arm_id  # on the simulated clock's steps
         periods = np.diff(ticks)
         assert int(np.median(periods)) == 40_000_000, arm_id
