@@ -116,6 +116,20 @@ def test_evaluate_tasks_writes_rows_per_arm_count(tmp_path: Path) -> None:
     assert "Ha et al." in (out / "summary.md").read_text()
 
 
+def test_the_summary_names_generated_tasks_as_such() -> None:
+    """Published figures on Ha et al.'s 48 tasks are not cited as if on generated ones."""
+    from nehmo_core.eval.task_runner import PUBLISHED, markdown
+
+    row = {"row": "nehmo", "ours": {"episodes": 0, "sr": 0, "cr_inter_arm": 0, "stuck_rate": 0}}
+    summary = {"rows": [{**row, "by_arms": {}}], "skipped": [], "success_rule": "r"}
+    summary["published"] = PUBLISHED
+    shared = markdown({**summary, "tasks": 1, "task_ids": ["135003"]})
+    generated = markdown({**summary, "tasks": 1, "task_ids": ["gen_8arm_s80_000"]})
+    assert shared.startswith("### Ha et al.'s tasks") and "Published on Ha et al.'s tasks" in shared
+    assert generated.startswith("### Generated tasks (Ha et al.'s protocol)")
+    assert "Published on other tasks of Ha et al.'s protocol" in generated
+
+
 def _two_arm_task(tmp_path: Path, planner: str, *options: str) -> dict:
     """``nehmo evaluate --tasks`` on Ha et al.'s two-arm task 135011 with ``options``: the
     summary it writes."""

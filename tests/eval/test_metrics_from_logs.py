@@ -21,6 +21,7 @@ from nehmo_core.eval.metrics import (
     EpisodeResult,
     aggregate,
     evaluate_log,
+    evaluate_logs,
     evaluate_or_error,
     format_metrics,
 )
@@ -218,6 +219,19 @@ def test_errors_stay_in_every_denominator(tmp_path: Path) -> None:
     assert "3 errors: " in line and "bad model" in line and "not closed" in line
     with pytest.raises(ValueError, match="outcomes must be among"):
         aggregate([EpisodeResult.failed("x").__class__(**{**vars(good), "outcome": "lost"})])
+
+
+def test_bags_read_on_a_process_pool_come_back_in_order(tmp_path: Path) -> None:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    paths = [_write_log(tmp_path / "a"), tmp_path / "never_written", _write_log(tmp_path / "b")]
+    serial = evaluate_logs(paths)
+    spawn = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(2, spawn) as pool:
+        pooled = evaluate_logs(paths, None, pool)
+    assert [r.outcome for r in pooled] == ["success", "error", "success"]
+    assert pooled == serial
 
 
 def test_a_batch_row_keeps_an_episode_that_raised(

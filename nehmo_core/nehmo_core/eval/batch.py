@@ -33,7 +33,7 @@ from nehmo_core.eval.metrics import (
     EpisodeResult,
     RowMetrics,
     aggregate,
-    evaluate_or_error,
+    evaluate_logs,
     failed_episode,
 )
 from nehmo_core.eval.planners import build_planners, unmodelled_peers
@@ -271,10 +271,12 @@ def run_rows(
                     bar.update(1)
                     bar.set_postfix_str(_postfix(memory.values()))
             logs = [job.log_path for job in jobs]
-            from_logs = [
-                memory[k] if memory[k].outcome == "error" else evaluate_or_error(p, kinds_of[row])
-                for k, p in enumerate(logs)
-            ]
+            # every result is read back from its bag (on the workers when they are local)
+            read = [k for k in range(len(logs)) if memory[k].outcome != "error"]
+            evaluated = evaluate_logs([logs[k] for k in read], kinds_of[row], executor)
+            from_logs = [memory[k] for k in range(len(logs))]
+            for k, result in zip(read, evaluated, strict=True):
+                from_logs[k] = result
             mismatches = [
                 k
                 for k, r in enumerate(from_logs)

@@ -45,6 +45,7 @@ __all__ = [
     "RowMetrics",
     "aggregate",
     "evaluate_log",
+    "evaluate_logs",
     "evaluate_or_error",
     "failed_episode",
     "format_metrics",
@@ -253,6 +254,18 @@ def evaluate_or_error(
         return evaluate_log(path_or_log)
     except (NehmoError, OSError) as exc:
         return EpisodeResult.failed(one_line(exc), kinds)
+
+
+def evaluate_logs(
+    paths: Sequence[Path], kinds: Mapping[str, str] | None = None, executor: Any = None
+) -> list[EpisodeResult]:
+    """:func:`evaluate_or_error` for each bag, in order; spread over ``executor``'s workers when
+    it is a local process pool (the bags are on this machine), else one after another."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    if isinstance(executor, ProcessPoolExecutor) and len(paths) > 1:
+        return list(executor.map(evaluate_or_error, paths, [kinds] * len(paths), chunksize=4))
+    return [evaluate_or_error(p, kinds) for p in paths]
 
 
 def failed_episode(what: str, exc: BaseException) -> EpisodeResult:
