@@ -52,8 +52,13 @@ def period_stats(periods_ms: np.ndarray) -> dict[str, Any]:
     }
 
 
-def analyse(log: Path, arm_ids: list[str], skip_s: float) -> dict[str, Any]:
-    """Per-arm period statistics from the log (the first ``skip_s`` seconds left out)."""
+def analyse(
+    log: Path, arm_ids: list[str], skip_s: float, real_time_factor: float = 1.0
+) -> dict[str, Any]:
+    """Per-arm period statistics from the log (the first ``skip_s`` seconds left out). With the
+    simulation run at ``real_time_factor`` below 1, a tick is due every ``40 ms / factor`` of wall
+    time, so the wall-clock periods at the planner are scaled by the factor before they are
+    compared with 40 ms."""
     publish: dict[str, list[int]] = {a: [] for a in arm_ids}
     ticks: dict[str, list[int]] = {a: [] for a in arm_ids}  # the node clock at each tick
     receive: dict[str, list[int]] = {a: [] for a in arm_ids}
@@ -73,10 +78,13 @@ def analyse(log: Path, arm_ids: list[str], skip_s: float) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for a in arm_ids:
         stats: dict[str, Any] = {}
-        for name, stamps in (("at_planner", publish[a]), ("at_recorder", receive[a])):
+        for name, stamps, scale in (
+            ("at_planner", publish[a], real_time_factor),
+            ("at_recorder", receive[a], 1.0),
+        ):
             t = np.sort(np.asarray(stamps, dtype=np.int64))
             t = t[t >= t[0] + skip_s * 1e9] if len(t) else t
-            stats[name] = period_stats(np.diff(t) / 1e6)
+            stats[name] = period_stats(np.diff(t) * scale / 1e6)
         if len(ticks[a]) == len(publish[a]) > 2:
             # the same ticks on the node clock (simulated time under use_sim_time), and how
             # fast that clock ran against the wall clock over them
