@@ -46,7 +46,7 @@ def worker(files: list[str], out: str, collect: bool) -> None:
     from nehmo_core.eval.ha_tasks import load_task
 
     if not collect:
-        task_runner.gc.collect = lambda *a, **k: 0  # type: ignore[assignment]
+        task_runner.gc.collect = lambda *a, **k: 0
     config = task_runner.TaskConfig(out_dir=Path(out))
     print(json.dumps({"task": "start", "rss_mb": round(_rss_mb(), 1)}), flush=True)
     for f in files:
