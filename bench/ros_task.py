@@ -151,7 +151,7 @@ def markdown(result: dict[str, Any]) -> str:
         fails = sum(s["fail_safes"] for s in r["per_arm"].values())
         codes = "all 0" if all(c == 0 for c in r["process_exit_codes"].values()) else "see json"
         lines.append(
-            f"| {r['layout']} | {r.get('real_time_factor', 1.0):g} | {r['repeat']} | "
+            f"| {r['layout']} | {r['real_time_factor']:g} | {r['repeat']} | "
             f"{r['outcome']} | {r['end_time']} | "
             f"{min(planner):.1f} / {np.median(planner):.1f} % | {sim_cell} | {rate_cell} | "
             f"{min(recorder):.1f} / {np.median(recorder):.1f} % | {q[1]} / {q[3]} | {misses} | "
@@ -162,7 +162,7 @@ def markdown(result: dict[str, Any]) -> str:
             continue
         lines += [
             "",
-            f"## {r['layout']}, real-time factor {r.get('real_time_factor', 1.0):g}, run 0",
+            f"## {r['layout']}, real-time factor {r['real_time_factor']:g}, run 0",
             "",
             "| arm | where | periods | within 40±5 ms | p0.1 / p1 / p50 / p99 / p99.9 [ms] | max |"
             " misses | fail-safes |",

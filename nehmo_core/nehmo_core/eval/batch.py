@@ -272,11 +272,8 @@ def run_rows(
                     bar.set_postfix_str(_postfix(memory.values()))
             logs = [job.log_path for job in jobs]
             # every result is read back from its bag (on the workers when they are local)
-            read = [k for k in range(len(logs)) if memory[k].outcome != "error"]
-            evaluated = evaluate_logs([logs[k] for k in read], kinds_of[row], executor)
-            from_logs = [memory[k] for k in range(len(logs))]
-            for k, result in zip(read, evaluated, strict=True):
-                from_logs[k] = result
+            known = [memory[k] for k in range(len(logs))]
+            from_logs = evaluate_logs(logs, kinds_of[row], executor, known)
             mismatches = [
                 k
                 for k, r in enumerate(from_logs)

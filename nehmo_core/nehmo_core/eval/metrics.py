@@ -257,15 +257,30 @@ def evaluate_or_error(
 
 
 def evaluate_logs(
-    paths: Sequence[Path], kinds: Mapping[str, str] | None = None, executor: Any = None
+    paths: Sequence[Path],
+    kinds: Mapping[str, str] | None = None,
+    executor: Any = None,
+    known: Sequence[EpisodeResult | None] | None = None,
 ) -> list[EpisodeResult]:
-    """:func:`evaluate_or_error` for each bag, in order; spread over ``executor``'s workers when
-    it is a local process pool (the bags are on this machine), else one after another."""
+    """:func:`evaluate_or_error` for each bag, in order, except where ``known`` (aligned with
+    ``paths``) holds an ``error`` result (an episode that raised: it stays as it is); spread over
+    ``executor``'s workers when it is a local process pool (the bags are on this machine), else
+    one after another."""
     from concurrent.futures import ProcessPoolExecutor
 
-    if isinstance(executor, ProcessPoolExecutor) and len(paths) > 1:
-        return list(executor.map(evaluate_or_error, paths, [kinds] * len(paths), chunksize=4))
-    return [evaluate_or_error(p, kinds) for p in paths]
+    out: list[EpisodeResult | None] = [
+        r if r is not None and r.outcome == "error" else None
+        for r in (known or [None] * len(paths))
+    ]
+    read = [k for k, r in enumerate(out) if r is None]
+    todo = [paths[k] for k in read]
+    if isinstance(executor, ProcessPoolExecutor) and len(todo) > 1:
+        found = executor.map(evaluate_or_error, todo, [kinds] * len(todo), chunksize=4)
+    else:
+        found = (evaluate_or_error(p, kinds) for p in todo)
+    for k, result in zip(read, found, strict=True):
+        out[k] = result
+    return [r for r in out if r is not None]
 
 
 def failed_episode(what: str, exc: BaseException) -> EpisodeResult:

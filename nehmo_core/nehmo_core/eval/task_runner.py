@@ -248,15 +248,9 @@ def run_tasks(
                         used[key].update(extra[key])
                     bar.update(1)
             # every result is read back from its bag (on the workers when they are local)
-            read = [t for t in runnable if t.task_id not in failed]
-            from_logs = dict(
-                zip(
-                    [t.task_id for t in read],
-                    evaluate_logs([_log_path(config, row, t) for t in read], None, executor),
-                    strict=True,
-                )
-            )
-            results = [failed.get(t.task_id) or from_logs[t.task_id] for t in runnable]
+            logs = [_log_path(config, row, t) for t in runnable]
+            known = [failed.get(t.task_id) for t in runnable]
+            results = evaluate_logs(logs, None, executor, known)
             summary = _row_summary(config, row, runnable, results, used, time.perf_counter() - t0)
             summaries.append(summary)
             if on_row is not None:
