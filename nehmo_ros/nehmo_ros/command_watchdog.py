@@ -10,13 +10,18 @@ the planner and the controller:
   ``--ros-args -r /<id>/velocity_controller/commands:=/<id>/planner/commands``);
 - the watchdog forwards every valid command at once to ``/<id>/velocity_controller/commands``
   (std_msgs/Float64MultiArray, the controller's topic);
-- when no command came for more than ``timeout`` seconds it publishes zeros (and keeps
-  publishing them every ``1/rate`` s) until commands come again; a command that is not finite
-  or has the wrong length is replaced by zeros at once.
+- a command is valid for ``validity`` seconds (default 0.06: the one 40 ms period the planner
+  checked it for, plus jitter): when the next one is late it publishes zeros (and keeps
+  publishing them every ``1/rate`` s) until commands come again, so a planner slowed by a
+  loaded machine never leaves the arm running on a command nobody checked; a command that is
+  not finite or has the wrong length is replaced by zeros at once;
+- when no command came for more than ``timeout`` seconds the planner is taken for lost (a trip:
+  a WARN line, and an INFO line when commands resume).
 
 The simulated bridge has the same watchdog built in (``command_timeout``); this node is the
 piece for a real arm. Parameters (validated at start, read-only): ``arm_id`` (required),
-``timeout`` [s] (default 0.2: five missed 25 Hz ticks), ``rate`` [Hz] of the check and of the
+``validity`` [s] (default 0.06), ``timeout`` [s] (default 0.2: five missed 25 Hz ticks),
+``rate`` [Hz] of the check and of the
 zeros (default 100), ``joints`` (the command length; 0: the length of the first command),
 ``input_topic`` and ``output_topic`` (defaults above). ``use_sim_time`` works as for any node:
 the timeout then runs on ``/clock``. It logs a WARN line when it takes over and an INFO line
@@ -38,7 +43,8 @@ __all__ = ["PARAMS", "CommandWatchdogNode", "main"]
 
 PARAMS: dict[str, Param] = {
     "arm_id": Param("", "the arm whose commands are watched (required)"),
-    "timeout": Param(0.2, "[s] no command for longer than this: zeros", 0.001, 60.0),
+    "validity": Param(0.06, "[s] a command's life: zeros when the next is later", 0.001, 60.0),
+    "timeout": Param(0.2, "[s] no command for longer than this: a trip", 0.001, 60.0),
     "rate": Param(100.0, "[Hz] how often the age is checked and zeros are repeated", 1.0, 1000.0),
     "joints": Param(0, "command length (0: the length of the first command)", 0, 64),
     "input_topic": Param("", "the planner's commands (default /<arm_id>/planner/commands)"),
@@ -62,17 +68,20 @@ class CommandWatchdogNode(Node):
         p = declare_parameters(self, PARAMS)
         self.arm_id = require_text("arm_id", p["arm_id"], "the arm to watch, e.g. ur5_0")
         self.timeout_ns = round(float(p["timeout"]) * 1e9)
+        self.validity_ns = round(float(p["validity"]) * 1e9)
         self.joints = int(p["joints"])
         source = p["input_topic"] or planner_topic(self.arm_id)
         target = p["output_topic"] or command_topic(self.arm_id)
         self.last_ns: int | None = None  # clock time of the last valid command
         self.tripped = False
-        self.counts = {"forwarded": 0, "rejected": 0, "zeros": 0, "trips": 0}
+        self.expired = False  # zeros since the latest command outlived its validity
+        self.counts = {"forwarded": 0, "rejected": 0, "zeros": 0, "trips": 0, "expired": 0}
         self.pub = self.create_publisher(Float64MultiArray, target, HISTORY)
         self.create_subscription(Float64MultiArray, source, self._on_command, HISTORY)
         self.timer = self.create_timer(1.0 / float(p["rate"]), self._on_check)
         self.get_logger().info(
-            f"watching {source} -> {target}: zeros after {p['timeout']:g} s without a command"
+            f"watching {source} -> {target}: zeros {p['validity']:g} s after a command "
+            f"without the next, a trip after {p['timeout']:g} s"
         )
 
     def _now(self) -> int:
@@ -97,6 +106,7 @@ class CommandWatchdogNode(Node):
             self._zeros()
             return
         self.last_ns = self._now()
+        self.expired = False
         if self.tripped:
             self.tripped = False
             self.get_logger().info(f"watchdog: commands for {self.arm_id} resumed")
@@ -107,9 +117,18 @@ class CommandWatchdogNode(Node):
         if self.last_ns is None:
             return  # nothing commanded yet: the controller holds what it has
         age = self._now() - self.last_ns
-        if age <= self.timeout_ns:
+        if age <= self.validity_ns:
             return
-        if not self.tripped:
+        if not self.expired:
+            self.expired = True
+            self.counts["expired"] += 1
+            self.get_logger().warning(
+                f"the command for {self.arm_id} is {age / 1e9:.3f} s old (> validity "
+                f"{self.validity_ns / 1e9:g} s: the planner runs late): zeros until the next "
+                f"({self.counts['expired']} times so far)",
+                throttle_duration_sec=2.0,
+            )
+        if age > self.timeout_ns and not self.tripped:
             self.tripped = True
             self.counts["trips"] += 1
             self.get_logger().warning(

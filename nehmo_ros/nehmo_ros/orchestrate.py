@@ -125,6 +125,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the planners in this many processes, several nodes each (default 0: one "
         "process per arm)",
     )
+    run.add_argument(
+        "--bridge-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set a sim_bridge parameter, e.g. command_validity=0.2 (repeatable)",
+    )
     run.add_argument("--out", default="nehmo_runs", help="output directory")
     run.add_argument("--render", action="store_true", help="render the first episode")
     ev = sub.add_parser("evaluate", help="metrics of episode logs")
@@ -151,6 +158,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _assignment(text: str) -> tuple[str, object]:
+    """``NAME=VALUE`` with VALUE read as a YAML scalar (0.2, true, text)."""
+    import yaml
+
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise InvalidValueError("--bridge-param", "must be NAME=VALUE", text)
+    return name.strip(), yaml.safe_load(value)
+
+
 def _run(args: argparse.Namespace) -> int:
     out_dir = Path(args.out).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -165,6 +182,7 @@ def _run(args: argparse.Namespace) -> int:
         domain_id=args.domain_id,
         install_space=args.install_space,
         planner_processes=args.planner_processes,
+        bridge_params=tuple(_assignment(text) for text in args.bridge_param),
     )
     summary = run_suite(scenario_file, _episodes(args.episodes, count), out_dir, settings)
     print(format_metrics(summary["metrics"]))

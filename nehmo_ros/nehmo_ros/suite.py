@@ -231,6 +231,7 @@ def run_episode(
                     "start_timeout": settings.startup_timeout,
                     "planners": settings.planner,
                     "min_subscribers": len(kinds) + 1,  # every planner and the recorder
+                    **dict(settings.bridge_params),
                 },
                 install_space=settings.install_space,
             ),

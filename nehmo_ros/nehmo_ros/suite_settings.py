@@ -27,6 +27,8 @@ class SuiteSettings:
     #: when the CPUs are busy; the recorder's deep reader history absorbs its delays.
     recorder_nice: int = 10
     extra_planner_args: tuple[str, ...] = ()
+    #: ``sim_bridge`` parameters set on top of the suite's (e.g. ``command_validity``).
+    bridge_params: tuple[tuple[str, object], ...] = ()
     #: Processes the planners run in: 0, one ``arm_planner`` per arm; k > 0, the arms dealt in
     #: order to at most k ``arm_planners`` processes (several nodes per process, composition).
     planner_processes: int = 0
@@ -47,6 +49,12 @@ class SuiteSettings:
         if self.domain_id is not None and not 0 <= self.domain_id <= 232:
             raise InvalidValueError("domain_id", "must lie in [0, 232]", self.domain_id)
         check_row_and_model(self.planner, self.model)
+        from sim_bridge.settings import PARAMS as BRIDGE_PARAMS
+
+        unknown = sorted({k for k, _ in self.bridge_params} - set(BRIDGE_PARAMS))
+        if unknown:
+            rule = f"must name sim_bridge parameters {sorted(BRIDGE_PARAMS)}"
+            raise InvalidValueError("bridge_params", rule, unknown)
         if self.install_space and not (Path(self.install_space) / "setup.bash").is_file():
             raise InvalidValueError(
                 "install_space",

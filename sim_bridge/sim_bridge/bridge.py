@@ -19,7 +19,10 @@ self-collision exactly (pairs that provably do not touch skip the exact query:
 It subscribes to ``/<arm>/velocity_controller/commands`` (std_msgs/Float64MultiArray, one value per
 joint in the robot's joint order). Commands of the wrong length, not finite or beyond a joint's
 velocity limit (the URDF's) are dropped (ros2_control drops wrong lengths silently; here each is
-counted and logged). **Watchdog:** an arm whose latest command is older than ``command_timeout``
+counted and logged). **Validity:** a command drives its arm for at most ``command_validity``
+(0.06 s: the one 40 ms period its planner checked it for, plus jitter) after it came; an arm
+whose planner runs late then holds still until its next command, not on a command nobody checked
+(steps counted per arm). **Watchdog:** an arm whose latest command is older than ``command_timeout``
 (simulated time with ``sim_time``, else wall time) holds still; each time that happens to an arm
 that was being commanded (its planner died, hung or lost the connection) a WARN line says so, and
 another when commands resume; the episode's end line counts the trips per arm.
@@ -110,6 +113,7 @@ class SimBridgeNode(Node):
             min_subscribers=int(p["min_subscribers"]),
             exit_when_done=bool(p["exit_when_done"]),
             actuators=str(p["actuators"]),
+            command_validity=float(p["command_validity"]),
         )
         kinds = parse_row(p["planners"], self.cell) if p["planners"] else {}
         self.scenario, source = load_episode(self.cell, p)
@@ -136,6 +140,8 @@ class SimBridgeNode(Node):
         self.commanded: set[str] = set()
         self.dropped: dict[str, int] = dict.fromkeys(self.cell.arm_ids, 0)
         self.watchdog_trips: dict[str, int] = dict.fromkeys(self.cell.arm_ids, 0)
+        #: Physics steps each arm held still because its latest command outlived its validity.
+        self.expired_steps: dict[str, int] = dict.fromkeys(self.cell.arm_ids, 0)
         #: Messages published (printed at the stop, for load tests).
         self.published = {"joint_states_per_arm": 0, "clock": 0, "collisions": 0}
         self._held: set[str] = set()  # arms the watchdog holds now
@@ -189,6 +195,7 @@ class SimBridgeNode(Node):
                 "max_ticks": round(s.time_limit * s.control_rate),
                 "physics_rate_hz": s.physics_rate,
                 "command_timeout": s.command_timeout,
+                "command_validity": s.command_validity,
                 "sim_time": s.sim_time,
             },
             "success": {"norm": s.success_norm, "tolerance": s.success_tolerance},
@@ -266,19 +273,34 @@ class SimBridgeNode(Node):
         self.commanded.add(arm_id)
 
     def _applied(self) -> dict[str, np.ndarray]:
-        """Each arm's velocity for this step: its latest command, or zero (watchdog, done)."""
+        """Each arm's velocity for this step: its latest command while it is valid, else zero
+        (a late planner: ``command_validity``; a silent one: the watchdog; the episode's end)."""
         now = self._now()
         out = {}
+        running = self.started and not self.done
         for arm in self.cell.arms:
-            latest = self.commands.get(arm.arm_id)
-            fresh = latest is not None and now - latest[1] <= self.s.command_timeout
-            if self.started and not self.done:
-                self._watch(arm.arm_id, latest is not None and not fresh, now, latest)
-            moving = self.started and not self.done and fresh
-            out[arm.arm_id] = (
-                latest[0] if moving and latest is not None else np.zeros(arm.robot.dof)
-            )
+            a = arm.arm_id
+            latest = self.commands.get(a)
+            age = now - latest[1] if latest is not None else math.inf
+            fresh = age <= self.s.command_timeout
+            valid = fresh and age <= self.s.command_validity
+            if running:
+                self._watch(a, latest is not None and not fresh, now, latest)
+                if fresh and not valid:
+                    self._expired(a, age)
+            still = np.zeros(arm.robot.dof)
+            out[a] = latest[0] if running and valid and latest is not None else still
         return out
+
+    def _expired(self, arm_id: str, age: float) -> None:
+        """Count (and report, throttled) a step held still because a command ran out."""
+        self.expired_steps[arm_id] += 1
+        self.get_logger().warning(
+            f"{arm_id}'s latest command is {age:.3f} s old (> command_validity "
+            f"{self.s.command_validity:g} s: its planner runs late): holding it still until the "
+            f"next ({self.expired_steps[arm_id]} steps so far)",
+            throttle_duration_sec=2.0,
+        )
 
     def _watch(
         self, arm_id: str, expired: bool, now: float, latest: tuple[np.ndarray, float] | None
@@ -355,9 +377,10 @@ class SimBridgeNode(Node):
             self._done_at = time.monotonic()
             dropped = sum(self.dropped.values())
             trips = {a: n for a, n in self.watchdog_trips.items() if n}
+            expired = {a: n for a, n in self.expired_steps.items() if n}
             self.get_logger().info(
                 f"episode done: {self.outcome} after {t:.2f} s ({dropped} commands dropped, "
-                f"watchdog trips {trips})"
+                f"watchdog trips {trips}, steps held on expired commands {expired})"
             )
             print(f"sim_bridge: episode {self.outcome} t={t:.3f}", flush=True)
 
@@ -377,6 +400,7 @@ class SimBridgeNode(Node):
             "published": self.published,
             "dropped_commands": self.dropped,
             "watchdog_trips": self.watchdog_trips,
+            "expired_command_steps": self.expired_steps,
         }
         print(f"sim_bridge: counts {json.dumps(counts)}", flush=True)
 

@@ -28,6 +28,11 @@ PARAMS: dict[str, Param] = {
     "sim_time": Param(False, "publish simulated time on /clock"),
     "real_time_factor": Param(1.0, "simulated seconds per wall second (with sim_time)"),
     "command_timeout": Param(0.2, "[s] watchdog: an arm with an older command holds still"),
+    "command_validity": Param(
+        0.06,
+        "[s] a command drives its arm at most this long after it came (the planner checked it "
+        "for one 40 ms period); then the arm holds still until the next one",
+    ),
     "time_limit": Param(20.0, "[s] episode length"),
     "success_norm": Param("l2", "l2 | linf: the goal distance norm"),
     "success_tolerance": Param(0.1, "[rad] goal distance that counts as reached"),
@@ -74,12 +79,15 @@ class BridgeSettings:
     min_subscribers: int
     exit_when_done: bool
     actuators: str = "ideal"
+    command_validity: float = math.inf
 
     def __post_init__(self) -> None:
         for name in ("physics_rate", "control_rate", "real_time_factor", "command_timeout"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise InvalidValueError(name, "must be a finite number > 0", value)
+        if not self.command_validity > 0:
+            raise InvalidValueError("command_validity", "must be > 0 [s]", self.command_validity)
         if not self.sim_time and self.real_time_factor != 1.0:
             raise InvalidValueError(
                 "real_time_factor",

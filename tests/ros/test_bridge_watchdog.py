@@ -33,20 +33,35 @@ class FakeClock:
         return self.now
 
 
+class RclpyLikeLogger:
+    """The standard logger with rclpy's keyword arguments (``throttle_duration_sec``)."""
+
+    def __init__(self) -> None:
+        self.log = logging.getLogger("bridge")
+
+    def warning(self, msg: str, **_: object) -> None:
+        self.log.warning(msg)
+
+    def info(self, msg: str, **_: object) -> None:
+        self.log.info(msg)
+
+
 def _bridge(clock: FakeClock, **changes: object) -> SimBridgeNode:
-    """A running bridge (episode started) without a middleware or a simulator."""
+    """A running bridge (episode started) without a middleware or a simulator; commands stay
+    valid for 1 s unless ``command_validity`` is given (the watchdog tests)."""
     bridge = SimBridgeNode.__new__(SimBridgeNode)
-    bridge.s = _settings(**changes)
+    bridge.s = _settings(**{"command_validity": 1.0, **changes})
     bridge.cell = CELL
     bridge.t_ns = 0
     bridge.started, bridge.done = True, False
     bridge.commands, bridge.commanded, bridge._held = {}, set(), set()
     bridge.dropped = dict.fromkeys(CELL.arm_ids, 0)
     bridge.watchdog_trips = dict.fromkeys(CELL.arm_ids, 0)
+    bridge.expired_steps = dict.fromkeys(CELL.arm_ids, 0)
     bridge.velocity_limits = {
         a.arm_id: np.array([j.velocity for j in a.robot.joints]) for a in CELL.arms
     }
-    bridge.get_logger = lambda: logging.getLogger("bridge")  # type: ignore[method-assign]
+    bridge.get_logger = lambda: RclpyLikeLogger()  # type: ignore[method-assign]
     return bridge
 
 
@@ -104,6 +119,35 @@ def test_a_dead_planner_is_caught_after_command_timeout_of_simulated_time(
         _advance(bridge, clock, 0.01, 0.01 / 5.0)
     assert moving_steps == 21  # ages 0, 0.01, ..., 0.2 s
     assert bridge.watchdog_trips["ur5_0"] == 1
+
+
+@pytest.mark.parametrize("rtf", [1.0, 5.0])
+def test_a_late_planners_command_drives_its_arm_for_one_period_then_the_arm_holds_still(
+    monkeypatch: pytest.MonkeyPatch, rtf: float
+) -> None:
+    """With the default validity (0.06 s of bridge time) a command moves its arm on 7 physics
+    steps (ages 0 ... 0.06 s); the arm then holds still, counted, without a watchdog trip, and
+    the next command moves it at once."""
+    clock = FakeClock()
+    monkeypatch.setattr(bridge_module, "time", clock)
+    bridge = _bridge(
+        clock, sim_time=True, real_time_factor=rtf, command_validity=DEFAULTS["command_validity"]
+    )
+    bridge._on_command("ur5_0", SimpleNamespace(data=COMMAND))
+    moving = []
+    for _ in range(15):  # 0.15 s of bridge time: three periods without a new command
+        moving.append(bool(np.any(bridge._applied()["ur5_0"])))
+        _advance(bridge, clock, 0.01, 0.01 / rtf)
+    assert moving == [True] * 7 + [False] * 8
+    assert bridge.expired_steps == {"ur5_0": 8, "ur5_1": 0}
+    assert bridge.watchdog_trips == {"ur5_0": 0, "ur5_1": 0}
+    bridge._on_command("ur5_0", SimpleNamespace(data=COMMAND))
+    np.testing.assert_array_equal(bridge._applied()["ur5_0"], COMMAND)
+
+
+def test_command_validity_must_be_positive() -> None:
+    with pytest.raises(InvalidValueError, match="`command_validity` must be > 0"):
+        _settings(command_validity=0.0)
 
 
 @pytest.mark.parametrize("rtf", [0.5, 2.0])

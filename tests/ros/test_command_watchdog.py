@@ -198,11 +198,12 @@ def test_a_new_command_is_forwarded_and_a_bad_one_replaced_by_zeros(run: Run) ->
 def test_the_watchdog_stops_cleanly_with_its_counters(run: Run) -> None:
     assert run.watchdog_code == 0, run.watchdog_log[-2000:]
     counts = re.search(r"stopped: \{'forwarded': \d+, 'rejected': (\d+), 'zeros': \d+, "
-                       r"'trips': (\d+)\}", run.watchdog_log)  # fmt: skip
+                       r"'trips': (\d+), 'expired': (\d+)\}", run.watchdog_log)  # fmt: skip
     assert counts is not None, run.watchdog_log[-2000:]
     # at least two trips: the killed planner, the probe's single command going stale (a
     # planner slowed past the timeout by a loaded machine trips it too, as it should)
     assert int(counts.group(1)) == 1 and int(counts.group(2)) >= 2
+    assert int(counts.group(3)) >= int(counts.group(2))  # every trip expired the command first
 
 
 def test_bad_parameters_are_one_line(tmp_path: Path) -> None:

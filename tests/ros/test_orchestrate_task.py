@@ -6,12 +6,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from nehmo_core.errors import InvalidValueError
 from nehmo_core.eval.ha_tasks import load_task
 from nehmo_core.eval.task_generator import TaskSpec, write_tasks
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import load_scenario_set
-from nehmo_ros.orchestrate import task_files
+from nehmo_ros.orchestrate import _assignment, build_parser, task_files
+from nehmo_ros.suite_settings import SuiteSettings
 
 
 def test_a_task_file_becomes_a_cell_and_a_scenario(tmp_path: Path) -> None:
@@ -28,3 +31,18 @@ def test_a_task_file_becomes_a_cell_and_a_scenario(tmp_path: Path) -> None:
     for arm_id in cell.arm_ids:
         np.testing.assert_allclose(scenario.start[arm_id], task.scenario.start[arm_id])
         np.testing.assert_allclose(scenario.goal[arm_id], task.scenario.goal[arm_id])
+
+
+def test_bridge_parameters_pass_through_and_unknown_ones_are_refused() -> None:
+    args = build_parser().parse_args(
+        ["run", "--bridge-param", "command_validity=0.2", "--bridge-param", "stop_on_success=false"]
+    )
+    assert [_assignment(t) for t in args.bridge_param] == [
+        ("command_validity", 0.2),
+        ("stop_on_success", False),
+    ]
+    with pytest.raises(InvalidValueError, match="`--bridge-param` must be NAME=VALUE"):
+        _assignment("command_validity")
+    with pytest.raises(InvalidValueError, match="`bridge_params` must name sim_bridge parameters"):
+        SuiteSettings(bridge_params=(("command_validty", 0.1),))
+    assert SuiteSettings(bridge_params=(("command_validity", 0.1),)).bridge_params

@@ -30,6 +30,7 @@ from nehmo_core.eval.metrics import format_metrics
 from nehmo_core.eval.report import markdown_table, setup_summary, write_summary
 from nehmo_core.eval.scenario_sets import scenario_set_for
 from nehmo_core.eval.setups import SETUPS, get_setup, parse_row, row_slug
+from nehmo_core.eval.stalls import Stalls, parse_stalls
 from nehmo_core.planning.models.registry import parse_value_models, snapshot_value_models
 from nehmo_core.planning.settings import PlannerSettings, parse_assignments
 from nehmo_core.sim.actuators import ACTUATOR_MODELS
@@ -120,6 +121,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(acceleration limits from the robot descriptions, command latency, joint-state noise)",
     )
     parser.add_argument(
+        "--stalls",
+        type=parse_stalls,
+        default=Stalls(),
+        metavar="RATE[,MAX_TICKS[,PROCESSES[,HOLD_TICKS[,expire]]]]",
+        help="overloaded planner processes (stress test, nehmo_core.eval.stalls): each tick a "
+        "process stalls with chance RATE for 1..MAX_TICKS periods (default 5); arms spread over "
+        "PROCESSES (0: one each); a command drives its arm for HOLD_TICKS periods (default 1, "
+        "the bridge's command_validity; 5: a 0.2 s watchdog only); 'expire': a late tick "
+        "publishes zero, not its stale plan",
+    )
+    parser.add_argument(
         "--time-limit",
         type=float,
         default=None,
@@ -167,6 +179,7 @@ def _run_tasks(args: argparse.Namespace, rows: list[str], settings: PlannerSetti
         episode=EpisodeSettings(
             time_limit=TIME_LIMIT if args.time_limit is None else args.time_limit,
             actuators=args.actuators,
+            stalls=args.stalls,
         ),
     )
 
@@ -216,6 +229,8 @@ def _episode_overrides(args: argparse.Namespace) -> tuple[tuple[str, object], ..
         overrides.append(("actuators", args.actuators))
     if args.time_limit is not None:
         overrides.append(("time_limit", args.time_limit))
+    if args.stalls != Stalls():
+        overrides.append(("stalls", args.stalls))
     return tuple(overrides)
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import zlib
 from collections import Counter
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +27,7 @@ from nehmo_core.errors import InvalidValueError, UnknownNameError
 from nehmo_core.eval.episode_log import EpisodeLogWriter, cell_metadata
 from nehmo_core.eval.metrics import EpisodeResult, goal_distance, path_lengths
 from nehmo_core.eval.setups import SUCCESS_NORMS, Setup
+from nehmo_core.eval.stalls import Stalls, StallSchedule
 from nehmo_core.eval.telemetry import status_message
 from nehmo_core.geometry.pybullet_world import Collision
 from nehmo_core.planning.nehmo import NehmoPlanner
@@ -51,6 +52,7 @@ class EpisodeSettings:
     success_tolerance: float = 0.1  # [rad]
     self_collision: bool = True
     actuators: str = "ideal"  # how arms carry commands out (nehmo_core.sim.actuators)
+    stalls: Stalls = field(default_factory=Stalls)  # overloaded processes (eval.stalls)
 
     def __post_init__(self) -> None:
         if not self.rate > 0:
@@ -110,6 +112,7 @@ def _metadata(
             "self_collision": settings.self_collision,
             "time_limit": settings.time_limit,
             "max_ticks": settings.max_ticks,
+            **({"stalls": settings.stalls.to_dict()} if settings.stalls.rate > 0 else {}),
         },
         "success": {"norm": settings.success_norm, "tolerance": settings.success_tolerance},
         "start": {a: [float(v) for v in scenario.start[a]] for a in cell.arm_ids},
@@ -213,7 +216,9 @@ def _loop(
     period_ns, dt = s.period_ns, s.period_ns / 1e9
     hold = {a.arm_id: np.zeros(a.robot.dof) for a in cell.arms}
     rec.tick(0, sim.positions(), hold)
-    pending: dict[str, np.ndarray] = {}
+    pending: dict[str, tuple[np.ndarray, int]] = {}  # each arm's latest plan and its tick
+    stalls = StallSchedule(s.stalls, cell.arm_ids, zlib.crc32(start.tobytes()) + 1)
+    sent: dict[str, tuple[np.ndarray, int]] = {a: (hold[a], 0) for a in cell.arm_ids}
     # announced speed bounds: heard one tick after they are made, checked against the motion
     nehmo = [p for p in planners.values() if isinstance(p, NehmoPlanner)]
     bounds = PeerBounds(max((p.settings.opt.d_max for p in nehmo), default=1.0))
@@ -223,13 +228,22 @@ def _loop(
     else:
         for k in range(s.max_ticks):
             observed = sim.observed()
-            applied = {a: pending.get(a, hold[a]) for a in cell.arm_ids}
+            stalled = stalls.at(k)
+            for a in cell.arm_ids:  # what each arm's planner publishes at this tick
+                if a not in stalled:
+                    sent[a] = (_due(pending.get(a), hold[a], k, s.stalls.expire_stale), k)
+            applied = {  # the actuator side: a command drives its arm for hold_ticks periods
+                a: sent[a][0] if k - sent[a][1] < s.stalls.hold_ticks else hold[a]
+                for a in cell.arm_ids
+            }
             planned = {}
             for a in cell.arm_ids:
                 bounds.observe(a, k * dt, observed[a])
             heard = bounds.bounds()
             announced = {}
             for a in cell.arm_ids:  # the worker thread: plans from tick k, used in tick k + 1
+                if a in stalled:
+                    continue
                 planner = planners[a]
                 peer_bounds = {p: b for p, b in heard.items() if p != a}
                 result = planner.plan(
@@ -251,7 +265,7 @@ def _loop(
             for a, b in announced.items():
                 bounds.announce(a, b)
             step = sim.step(applied, dt)
-            pending = planned
+            pending.update((a, (v, k)) for a, v in planned.items())
             ticks = k + 1
             rec.tick(ticks * period_ns, sim.positions(), applied)
             if step.collisions:
@@ -264,6 +278,16 @@ def _loop(
                 outcome = "success"
                 break
     return _result(cell, scenario, s, rec, kinds, timed, outcome, ticks, collisions)
+
+
+def _due(
+    plan: tuple[np.ndarray, int] | None, hold: np.ndarray, tick: int, expire: bool
+) -> np.ndarray:
+    """The command published at ``tick``: the latest plan (zero before the first, and with
+    ``expire`` when it was planned more than one period ago, after a stall)."""
+    if plan is None or (expire and plan[1] < tick - 1):
+        return hold
+    return plan[0]
 
 
 def _result(
