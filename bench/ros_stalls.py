@@ -1,7 +1,7 @@
 """Planner processes frozen at random through the node suite: does a late arm stay safe?
 
     python bench/ros_stalls.py [--cell five_ur5] [--seed 99] [--count 10] [--planner-processes 2]
-        [--validities 0.2,0.06] [--stall-rate 1.5] [--stall-ms 40,320] [--name ros_stalls]
+        [--rows before,today] [--stall-rate 1.5] [--stall-ms 40,320] [--name ros_stalls]
         [--results DIR] [--keep DIR]
 
 An overloaded machine runs a planner process's ticks late; here that is made to happen on
@@ -10,10 +10,12 @@ process at a time (SIGSTOP, then SIGCONT after 40–320 ms, uniform; the freezes
 process of ``--stall-rate`` per second over the whole suite), so every arm of that process gets
 no command for that long and then catches up. The same episodes (``orchestrate run --cell CELL
 --seed SEED --count COUNT --planner-processes K``, real time, simulated clock) run once per
-value of the bridge's ``command_validity`` (``--validities``): 0.2 s equals the watchdog's
-``command_timeout``, so a late arm keeps running on its last command for up to five periods
-(the behaviour before ``command_validity`` existed); 0.06 s, the default, stops it about one
-period after its last command. Freezes follow the same seeded schedule in each run.
+row (``--rows``): ``today`` is the defaults (the bridge applies a command for at most
+``command_validity`` 0.06 s; a planner never sends a plan over ``plan_age`` 1.5 periods old);
+``before`` turns both rules off as they were before they existed (``command_validity`` 0.2 s,
+the watchdog's timeout; ``plan_age`` .inf), so a late arm keeps its last command for up to five
+periods and then runs on a plan made before the freeze. Freezes follow the same seeded schedule
+in each row.
 
 Per episode: the outcome, the closest approach between any two arms (exact distance at every
 second logged instant), the bridge's steps held on expired commands and watchdog trips, and the
@@ -97,11 +99,16 @@ def closest_approach(bag: Path) -> float:
     return float(min(s.min() for s in series.values()))
 
 
-def run(args: argparse.Namespace, validity: float, out: Path) -> dict[str, Any]:
+ROWS = {
+    "before": ["--bridge-param", "command_validity=0.2", "--planner-param", "plan_age=.inf"],
+    "today": [],
+}
+
+
+def run(args: argparse.Namespace, row: str, out: Path) -> dict[str, Any]:
     argv = [sys.executable, "-m", "nehmo_ros.orchestrate", "run", "--cell", args.cell]
     argv += ["--seed", str(args.seed), "--count", str(args.count), "--out", str(out)]
-    argv += ["--planner-processes", str(args.planner_processes)]
-    argv += ["--bridge-param", f"command_validity={validity}"]
+    argv += ["--planner-processes", str(args.planner_processes), *ROWS[row]]
     freezer = Freezer(args.stall_rate, args.stall_ms, args.seed)
     freezer.start()
     start = time.monotonic()
@@ -125,9 +132,10 @@ def run(args: argparse.Namespace, validity: float, out: Path) -> dict[str, Any]:
                 "watchdog_trips": sum(counts.get("watchdog_trips", {}).values()),
             }
         )
-        print(f"validity {validity:g} episode {e['episode']}: {episodes[-1]}", flush=True)
+        print(f"{row} episode {e['episode']}: {episodes[-1]}", flush=True)
     return {
-        "command_validity": validity,
+        "row": row,
+        "orchestrate_options": " ".join(ROWS[row]),
         "exit_code": done.returncode,
         "wall_seconds": round(time.monotonic() - start, 1),
         "freezes": len(freezer.freezes),
@@ -144,9 +152,11 @@ def markdown(result: dict[str, Any]) -> str:
         "",
         f"{result['machine']}. `{result['command']}`. Freezes: {result['stall_rate']:g} per "
         f"second over the suite, {result['stall_ms'][0]:g}–{result['stall_ms'][1]:g} ms each "
-        "(SIGSTOP/SIGCONT of one planner process). Rows run one after the other, same episodes.",
+        "(SIGSTOP/SIGCONT of one planner process). Rows run one after the other, same episodes; "
+        "*before*: `command_validity` 0.2 s and `plan_age` .inf (the rules off), *today*: the "
+        "defaults (0.06 s, 1.5 periods).",
         "",
-        "| command_validity [s] | episodes | success | collision | stuck | error | closest "
+        "| row | episodes | success | collision | stuck | error | closest "
         "approach min / median [cm] | freezes | steps held on expired commands | watchdog "
         "trips |",
         "|---|---|---|---|---|---|---|---|---|---|",
@@ -156,14 +166,14 @@ def markdown(result: dict[str, Any]) -> str:
         closest = [e["closest_m"] * 100 for e in r["episodes"] if e["closest_m"] is not None]
         near = f"{min(closest):.1f} / {np.median(closest):.1f}" if closest else "–"
         lines.append(
-            f"| {r['command_validity']:g} | {len(outcomes)} | {outcomes.count('success')} | "
+            f"| {r['row']} | {len(outcomes)} | {outcomes.count('success')} | "
             f"{outcomes.count('collision')} | {outcomes.count('stuck')} | "
             f"{outcomes.count('error')} | {near} | {r['freezes']} | "
             f"{sum(e['expired_steps'] for e in r['episodes'])} | "
             f"{sum(e['watchdog_trips'] for e in r['episodes'])} |"
         )
     lines += ["", "Per episode (outcome, closest approach [cm]):", ""]
-    header = "| episode | " + " | ".join(f"{r['command_validity']:g} s" for r in result["runs"])
+    header = "| episode | " + " | ".join(r["row"] for r in result["runs"])
     lines += [header + " |", "|---" * (len(result["runs"]) + 1) + "|"]
     for i in range(len(result["runs"][0]["episodes"])):
         cells = []
@@ -181,26 +191,28 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=99, help="scenario seed (and freeze seed)")
     parser.add_argument("--count", type=int, default=10, help="episodes per row")
     parser.add_argument("--planner-processes", type=int, default=2)
-    parser.add_argument("--validities", default="0.2,0.06", help="command_validity values [s]")
+    parser.add_argument("--rows", default="before,today", help=f"rows, of {sorted(ROWS)}")
     parser.add_argument("--stall-rate", type=float, default=1.5, help="freezes per second")
     parser.add_argument("--stall-ms", default="40,320", help="freeze length range [ms]")
     parser.add_argument("--name", default="ros_stalls", help="report name: results/<name>.md")
     parser.add_argument("--keep", help="directory for the bags and the process outputs")
     parser.add_argument("--results", default=str(RESULTS), help="where the report goes")
     args = parser.parse_args()
-    validities = [float(x) for x in args.validities.split(",") if x.strip()]
+    rows = [x.strip() for x in args.rows.split(",") if x.strip()]
     low, high = (float(x) for x in args.stall_ms.split(","))
     args.stall_ms = (low, high)
-    if not validities or not 0 < low <= high or not args.stall_rate > 0 or args.count < 1:
-        parser.error("--validities, --stall-ms (0 < low <= high), --stall-rate > 0, --count >= 1")
+    if not rows or set(rows) - set(ROWS):
+        parser.error(f"--rows takes names of {sorted(ROWS)}, got {args.rows}")
+    if not 0 < low <= high or not args.stall_rate > 0 or args.count < 1:
+        parser.error("--stall-ms needs 0 < low <= high, --stall-rate > 0, --count >= 1")
     runs = []
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(args.keep) if args.keep else Path(tmp)
-        for validity in validities:
-            runs.append(run(args, validity, root / f"validity_{validity:g}"))
+        for row in rows:
+            runs.append(run(args, row, root / row))
     command = (
         f"python bench/ros_stalls.py --cell {args.cell} --seed {args.seed} --count {args.count} "
-        f"--planner-processes {args.planner_processes} --validities {args.validities} "
+        f"--planner-processes {args.planner_processes} --rows {args.rows} "
         f"--stall-rate {args.stall_rate:g} --stall-ms {low:g},{high:g} --name {args.name}"
     )
     result = {

@@ -27,8 +27,10 @@ Parameters (validated at start; a bad one stops the node with one line naming it
 the value): ``arm_id`` (required), ``cell`` (required: shipped name or YAML path), ``planner``
 (nehmo | nehmo_paper | nehmo_no_sym | opt_deepreach | nehmo_wrap | naive | reckless), ``model``
 (shipped | synthetic | path), ``rate`` [Hz], ``peer_timeout`` [s], ``stale_policy`` (hold |
-fail_safe: what a stale or untrusted peer triggers), ``jump_margin`` [rad] (slack of the test
-that flags joint states moving faster than ``opt.d_max``; ``.inf``: off), ``allow_unmodelled``
+fail_safe: what a stale or untrusted peer triggers), ``plan_age`` [periods] (1.5: a plan of
+older observations is not sent, ``late_plan``; ``.inf``: off), ``jump_margin`` [rad] (slack of
+the test that flags joint states moving faster than ``opt.d_max``; ``.inf``: off),
+``allow_unmodelled``
 (accept peers in reach that no pair model covers: they are then not constrained; default false:
 an error), ``fault_injection`` (tests only, default '' = off: :mod:`nehmo_ros.fault_injection`),
 and every planner setting by its dotted name (``opt.t_plan``, ``hold.bound``,
@@ -107,6 +109,9 @@ NODE_PARAMS: dict[str, Param] = {
     "stale_policy": Param(_CONTROL.stale_policy, "hold | fail_safe: on a stale/untrusted peer"),
     "jump_margin": Param(
         _CONTROL.jump_margin, "[rad] slack of the test flagging states faster than opt.d_max"
+    ),
+    "plan_age": Param(
+        _CONTROL.plan_age, "[periods] a plan of older observations is not sent (.inf: off)"
     ),
     "allow_unmodelled": Param(False, "accept peers in reach that no pair model covers"),
     "autostart": Param(True, "configure and activate at start (false: a lifecycle manager does)"),
@@ -278,6 +283,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
             peer_timeout=float(p["peer_timeout"]),
             stale_policy=p["stale_policy"],
             jump_margin=float(p["jump_margin"]),
+            plan_age=float(p["plan_age"]),
             opt=settings.opt,
         )
         fault = parse_fault(str(p["fault_injection"]))
@@ -414,6 +420,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
             "deadline_misses": c.deadline_misses,
             "fail_safes": c.fail_safes,
             "solver_errors": c.solver_errors,
+            "late_plans": c.late_plans,
         }
         print(f"{self.get_name()}: stopped; counts {json.dumps(counts)}", flush=True)
 

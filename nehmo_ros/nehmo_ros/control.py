@@ -1,48 +1,40 @@
 """One arm's control loop without a middleware: state buffer, solve worker, fail-safe rules.
 
-The ``arm_planner`` node is a thin shell around :class:`ArmController`; everything here is
-tested without ROS. It lives in ``nehmo_ros`` although it imports no ROS package because it is
-the node's behaviour (its parameters, rules and counters), not a planning algorithm: the core's
-batch runner plans on a fixed clock and has no deadlines, stale peers or rejected messages.
-
-Timing: at tick ``k`` the controller publishes the command
-solved from the observations of tick ``k − 1`` and hands the observations of tick ``k`` to a
-worker thread, so a solve has one whole period while the current command executes.
+The ``arm_planner`` node is a thin shell around :class:`ArmController` (tested without ROS;
+the node's behaviour, not a planning algorithm, hence in ``nehmo_ros``). At tick ``k`` the
+controller publishes the command solved from the observations of tick ``k − 1`` and hands those
+of tick ``k`` to a worker thread: a solve has one period while the current command executes.
 
 Rules, in order of precedence, for the command of a tick:
 
 1. no fresh own state, own state untrusted (see below), or no goal yet → hold still;
 2. the solve of the previous tick has not finished (missed deadline) → the fail-safe computed
    from the previous observations before that solve started (hold still once that fail-safe is
-   older than ``peer_timeout``: a hung solver does not steer the arm on old information);
+   older than ``peer_timeout``); any command planned from observations over ``plan_age`` (1.5)
+   periods older than the tick (the process ran late) → hold still (``late_plan``): it was
+   checked for a period that has passed;
 3. a peer in the cell has never been heard from → hold still;
 4. a peer's state is stale (older than ``peer_timeout``) or untrusted → ``stale_policy``: hold
    still (``hold``, the default) or the fail-safe against its latest valid state
-   (``fail_safe``). Holding is the default because it measured safer: with a silent peer that
-   runs NeHMO itself, 1 % collisions against 10 % for the fail-safe, which steers by where the
-   peer *was* (100 crossing dual-UR5 episodes, ``python -m nehmo_ros.fault_episodes``);
+   (``fail_safe``). Holding measured safer: with a silent NeHMO peer, 1 % collisions against
+   10 % for the fail-safe (100 dual-UR5 episodes, ``python -m nehmo_ros.fault_episodes``);
 5. the solver failed, was infeasible or late inside ``plan`` → the planner's fail-safe;
 6. otherwise the planner's command.
 
-Peers' announced speed bounds (:mod:`nehmo_core.planning.stages.speed_bounds`) reach the controller
-through :meth:`ArmController.announce`; each valid joint state is checked against them, and the
-planner plans every peer against the bound it still keeps. The arm's own announcement is
-:attr:`ArmController.announcement` (1 for planners that announce nothing).
-
-Every command, the fail-safe of rule 2 included, is clipped to ±``u_max``; one with a value that
-is not finite becomes a hold. A missed deadline reports no solve time (NaN: no solve finished in
-time); the abandoned solve's own time comes with the first command after it finished
-(``Decision.late_solve_time``).
+Peers' announced speed bounds (:mod:`nehmo_core.planning.stages.speed_bounds`) come through
+:meth:`ArmController.announce`; each valid joint state is checked against them, and every peer
+is planned against the bound it still keeps (own: :attr:`ArmController.announcement`).
+Every command is clipped to ±``u_max``; a non-finite one becomes a hold. A missed deadline
+reports no solve time (NaN); the abandoned solve's time comes with the first command after it
+finished (``Decision.late_solve_time``).
 
 Joint states that are NaN/inf, of the wrong length or with unknown joint names are rejected
-(counted and reported) and leave the previous valid state in place, so a peer sending only
-garbage turns stale. A valid state that moved further than the arm can move since its previous
-one (a *jump*: more than ``jump_margin + 2·speed·Δt`` on some joint, ``speed`` = ``d_max`` for
-peers and ``u_max`` for the own arm, ``Δt`` the larger of the receive and the header-stamp
-intervals) is kept, since it is the newest measurement, but counted. A rejected state or a jump
-makes that arm *untrusted* for ``peer_timeout``: its data broke the model the planner's safety
-argument rests on (finite states, speeds bounded by ``d_max``). Times here are monotonic
-seconds given by the caller.
+(counted) and leave the previous valid state in place, so a peer sending only garbage turns
+stale. A valid state that moved further than the arm can (a *jump*: more than ``jump_margin +
+2·speed·Δt`` on some joint, ``speed`` = ``d_max`` for peers and ``u_max`` for the own arm,
+``Δt`` the larger of the receive and the header-stamp intervals) is kept but counted. A rejected
+state or a jump makes that arm *untrusted* for ``peer_timeout``: its data broke the model the
+safety argument rests on. Times here are monotonic seconds given by the caller.
 """
 
 from __future__ import annotations
@@ -77,17 +69,15 @@ STALE_POLICIES = ("fail_safe", "hold")
 
 @dataclass(frozen=True)
 class ControlSettings:
-    """Rate [Hz], staleness timeout [s], what a stale peer triggers, and the jump test.
-
-    The speed bounds come from the planner's ``opt`` settings (one source): every command is
-    clipped to ±``opt.u_max``, and a peer state moving faster than ``opt.d_max`` (plus
-    ``jump_margin``) is a jump. The solve budget is the planner's ``opt.deadline``.
-    """
+    """Rate [Hz], staleness timeout [s], what a stale peer triggers, and the jump test; speed
+    bounds (commands clipped to ``opt.u_max``, jumps beyond ``opt.d_max`` + ``jump_margin``) and
+    the solve budget (``opt.deadline``) are the planner's ``opt`` settings."""
 
     rate: float = 25.0
     peer_timeout: float = 0.25  # a joint state older than this is stale
     stale_policy: str = "hold"
     jump_margin: float = 0.1  # [rad] slack of the jump test (inf: no jump test)
+    plan_age: float = 1.5  # [periods] a plan of older observations is not sent (inf: off)
     opt: OptSettings = field(default_factory=OptSettings)  # the planner's: u_max, d_max
 
     def __post_init__(self) -> None:
@@ -99,6 +89,8 @@ class ControlSettings:
             raise UnknownNameError("stale_policy", self.stale_policy, STALE_POLICIES)
         if not self.jump_margin > 0:
             raise InvalidValueError("jump_margin", "must be > 0 [rad] (inf: off)", self.jump_margin)
+        if not self.plan_age > 1:
+            raise InvalidValueError("plan_age", "must be > 1 period (inf: off)", self.plan_age)
 
     @property
     def period(self) -> float:
@@ -114,20 +106,16 @@ class Counters:
     fail_safes: int = 0
     holds: int = 0
     solver_errors: int = 0
+    late_plans: int = 0
 
 
 class ArmController:
     """Per-tick command of one arm: the planner runs in a worker, the rules above around it."""
 
     def __init__(
-        self,
-        cell: Cell,
-        arm_id: str,
-        planner: Planner,
-        settings: ControlSettings | None = None,
+        self, cell: Cell, arm_id: str, planner: Planner, settings: ControlSettings | None = None
     ) -> None:
-        self.cell = cell
-        self.arm_id = arm_id
+        self.cell, self.arm_id = cell, arm_id
         self.robot = cell.arm(arm_id).robot
         self.planner = planner
         self.settings = settings or ControlSettings()
@@ -143,7 +131,8 @@ class ArmController:
         self._submitted: Observation | None = None  # the job whose result is due next tick
         self._abandoned: int | None = None  # tick of a late job whose solve time is not out yet
         self._fallback_lock = threading.Lock()
-        self._fallback: tuple[int, np.ndarray] | None = None  # (tick, fail-safe) of the latest job
+        #: (tick, fail-safe, observation stamp [ns]) of the latest job
+        self._fallback: tuple[int, np.ndarray, int] | None = None
         self._finished: dict[int, float] = {}  # tick → solve time of jobs finished lately
         self._worker = SolveWorker(self._solve, name=f"solve_{arm_id}")
         self._bounds = PeerBounds(s.opt.d_max)
@@ -252,7 +241,7 @@ class ArmController:
         obs = self.observe(now, stamp_ns)
         if self._paused or self._resuming:
             return self._held_tick(obs, send)
-        decision = self._collect(obs)
+        decision = self._expire(self._collect(obs), obs)
         self._count(decision)
         self.last_observation = obs
         if send is not None:
@@ -339,7 +328,15 @@ class ArmController:
         velocity = self._guard(fallback[1])
         if velocity is None:
             return replace(late, error="the fail-safe command is not finite")
-        return replace(late, velocity=velocity, hold=False)
+        return replace(late, velocity=velocity, hold=False, observation_ns=fallback[2])
+
+    def _expire(self, decision: Decision, current: Observation) -> Decision:
+        """Rule 2's ``late_plan``: zero for a command planned > ``plan_age`` periods ago."""
+        age_ns = current.stamp_ns - decision.observation_ns
+        if decision.hold or age_ns <= self.settings.plan_age * 1e9 / self.settings.rate:
+            return decision
+        self.counters.late_plans += 1
+        return replace(decision, velocity=zeros(self.robot.dof), status="late_plan", hold=True)
 
     def _guard(self, velocity: np.ndarray) -> np.ndarray | None:
         """``velocity`` [rad/s] clipped to ±u_max, or None when some value is not finite."""
@@ -431,7 +428,7 @@ class ArmController:
         else:
             fallback = self._fail_safe_velocity(obs.q_self, obs.peers, bounds)
         with self._fallback_lock:
-            self._fallback = (obs.tick, fallback)
+            self._fallback = (obs.tick, fallback, obs.stamp_ns)
         if doubtful:
             status = "stale_peer" if obs.stale else "untrusted_peer"
             if self.settings.stale_policy == "hold":

@@ -132,6 +132,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME=VALUE",
         help="set a sim_bridge parameter, e.g. command_validity=0.2 (repeatable)",
     )
+    run.add_argument(
+        "--planner-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set a parameter of every planner node, e.g. plan_age=.inf (repeatable)",
+    )
     run.add_argument("--out", default="nehmo_runs", help="output directory")
     run.add_argument("--render", action="store_true", help="render the first episode")
     ev = sub.add_parser("evaluate", help="metrics of episode logs")
@@ -158,14 +165,20 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _assignment(text: str) -> tuple[str, object]:
+def _assignment(text: str, option: str = "--bridge-param") -> tuple[str, object]:
     """``NAME=VALUE`` with VALUE read as a YAML scalar (0.2, true, text)."""
     import yaml
 
     name, sep, value = text.partition("=")
     if not sep or not name.strip():
-        raise InvalidValueError("--bridge-param", "must be NAME=VALUE", text)
+        raise InvalidValueError(option, "must be NAME=VALUE", text)
     return name.strip(), yaml.safe_load(value)
+
+
+def _ros_param(text: str) -> str:
+    """``NAME=VALUE`` as a ``--ros-args -p`` item, ``NAME:=VALUE``."""
+    name, _ = _assignment(text, "--planner-param")  # checks the form
+    return f"{name}:={text.partition('=')[2].strip()}"
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -183,6 +196,9 @@ def _run(args: argparse.Namespace) -> int:
         install_space=args.install_space,
         planner_processes=args.planner_processes,
         bridge_params=tuple(_assignment(text) for text in args.bridge_param),
+        extra_planner_args=tuple(
+            arg for text in args.planner_param for arg in ("-p", _ros_param(text))
+        ),
     )
     summary = run_suite(scenario_file, _episodes(args.episodes, count), out_dir, settings)
     print(format_metrics(summary["metrics"]))

@@ -67,6 +67,12 @@ class PlannerReports:
                 f"in {c.ticks} ticks)",
                 throttle_duration_sec=WARN_EVERY,
             )
+        elif d.status == "late_plan":
+            log.warning(
+                f"tick ran late: the plan of tick {d.tick} is over 1.5 periods old; holding still "
+                f"({c.late_plans} late plans in {c.ticks} ticks)",
+                throttle_duration_sec=WARN_EVERY,
+            )
         if d.stale or d.untrusted:
             action = "zero velocity" if d.hold else "the fail-safe"
             log.warning(
@@ -95,6 +101,7 @@ class PlannerReports:
             "fail_safes": c.fail_safes,
             "holds": c.holds,
             "solver_errors": c.solver_errors,
+            "late_plans": c.late_plans,
             "rejected_states": sum(self.controller.states.rejected.values()),
             "state_jumps": sum(self.controller.states.jumps.values()),
             "period": repr(period),

@@ -94,12 +94,15 @@ def test_the_schedule_is_seeded_and_groups_arms_round_robin() -> None:
 
 
 def test_parse_stalls_reads_the_option_and_rejects_bad_text() -> None:
-    assert parse_stalls("0.05") == Stalls(rate=0.05)
+    assert parse_stalls("0.05") == Stalls(rate=0.05, hold_ticks=1, expire_stale=True)
     assert parse_stalls("0.03,8,2,1,expire") == Stalls(0.03, 8, 2, 1, True)
+    assert parse_stalls("0.03,8,2,5,send") == Stalls(0.03, 8, 2, 5, False)
     with pytest.raises(InvalidValueError, match="`--stalls` must be RATE"):
         parse_stalls("0.1,2,3,4,5")
     with pytest.raises(InvalidValueError, match="`--stalls` must be a rate then integers"):
         parse_stalls("often")
+    with pytest.raises(InvalidValueError, match="`--stalls` must be a rate then integers"):
+        parse_stalls("0.1,2,late")
     with pytest.raises(InvalidValueError, match=r"`stalls\.rate` must be in \[0, 1\]"):
         parse_stalls("1.5")
     with pytest.raises(InvalidValueError, match=r"`stalls\.hold_ticks` must be >= 1"):

@@ -31,6 +31,7 @@ def _bridge(at_goal: bool, t: float, **changes: object) -> SimpleNamespace:
         _done_at=0.0,
         dropped={a: 0 for a in cell.arm_ids},
         watchdog_trips={a: 0 for a in cell.arm_ids},
+        expired_steps={a: 0 for a in cell.arm_ids},
         get_logger=lambda: logging.getLogger("bridge"),
     )
 

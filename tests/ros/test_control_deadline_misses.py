@@ -236,3 +236,73 @@ def test_the_planner_is_told_which_command_runs_while_it_plans() -> None:
     np.testing.assert_array_equal(sent.velocity, FAIL_SAFE)  # the late solve is dropped
     np.testing.assert_array_equal(planner.told[2], on_time.velocity)
     assert on_time.status == "optimal"
+
+
+def test_a_plan_from_observations_over_one_and_a_half_periods_old_is_not_sent() -> None:
+    """A process that ran late (its tick 200 ms after the previous one, as under a loaded
+    machine) holds still instead of sending the plan of the old observations (``late_plan``,
+    counted); on time again, the plan of the previous tick is sent."""
+    planner = RecordingPlanner()
+    c = _controller(planner)
+    period_ns = 40_000_000
+    try:
+        _feed(c, 0.0, 1.0)
+        c.tick(0.0, 0)
+        _wait_idle(c)
+        _feed(c, 0.04, 2.0)
+        on_time = c.tick(0.04, period_ns)  # planned from tick 0: one period old
+        assert on_time.status == "optimal" and not on_time.hold
+        np.testing.assert_allclose(on_time.velocity, 0.01)
+        _wait_idle(c)
+        _feed(c, 0.24, 3.0)
+        late = c.tick(0.24, 6 * period_ns)  # planned from tick 1, five periods ago
+        assert late.status == "late_plan" and late.hold
+        np.testing.assert_array_equal(late.velocity, np.zeros(6))
+        assert c.counters.late_plans == 1 and c.counters.holds >= 1
+        _wait_idle(c)
+        _feed(c, 0.28, 4.0)
+        again = c.tick(0.28, 7 * period_ns)  # planned from the late tick: one period old
+        assert again.status == "optimal"
+        np.testing.assert_allclose(again.velocity, 0.03)
+    finally:
+        c.stop()
+
+
+def test_a_late_fail_safe_carries_the_stamp_of_the_observations_it_came_from() -> None:
+    """A missed deadline commands the fail-safe of the job's observations, stamped with them: it
+    is sent one period on, and held back (``late_plan``) when the tick comes too late for it."""
+    planner = RecordingPlanner(delay=0.1)
+    c = _controller(planner)
+    period_ns = 40_000_000
+    try:
+        _feed(c, 0.0, 1.0)
+        c.tick(0.0, 0)
+        _in_plan(planner)
+        missed = c.tick(0.04, period_ns)
+        assert missed.status == "deadline_missed" and missed.observation_ns == 0
+        np.testing.assert_array_equal(missed.velocity, FAIL_SAFE)
+        late = c.tick(0.2, 5 * period_ns)  # the same fail-safe, now five periods old
+        assert late.status == "late_plan" and late.hold
+        np.testing.assert_array_equal(late.velocity, np.zeros(6))
+    finally:
+        c.stop()
+
+
+def test_plan_age_can_be_turned_off_and_must_exceed_one_period() -> None:
+    from nehmo_core.errors import InvalidValueError
+    from nehmo_ros.control import ControlSettings
+
+    planner = RecordingPlanner()
+    c = _controller(planner, plan_age=math.inf)
+    try:
+        _feed(c, 0.0, 1.0)
+        c.tick(0.0, 0)
+        _wait_idle(c)
+        _feed(c, 0.24, 2.0)
+        late = c.tick(0.24, 240_000_000)  # six periods on: sent all the same
+        assert late.status == "optimal" and c.counters.late_plans == 0
+        np.testing.assert_allclose(late.velocity, 0.01)
+    finally:
+        c.stop()
+    with pytest.raises(InvalidValueError, match=r"`plan_age` must be > 1 period"):
+        ControlSettings(plan_age=1.0)

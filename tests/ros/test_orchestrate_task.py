@@ -13,7 +13,7 @@ from nehmo_core.eval.ha_tasks import load_task
 from nehmo_core.eval.task_generator import TaskSpec, write_tasks
 from nehmo_core.robots import load_cell
 from nehmo_core.sim.scenario_files import load_scenario_set
-from nehmo_ros.orchestrate import _assignment, build_parser, task_files
+from nehmo_ros.orchestrate import _assignment, _ros_param, build_parser, task_files
 from nehmo_ros.suite_settings import SuiteSettings
 
 
@@ -41,6 +41,7 @@ def test_bridge_parameters_pass_through_and_unknown_ones_are_refused() -> None:
         ("command_validity", 0.2),
         ("stop_on_success", False),
     ]
+    assert _ros_param("plan_age=.inf") == "plan_age:=.inf"
     with pytest.raises(InvalidValueError, match="`--bridge-param` must be NAME=VALUE"):
         _assignment("command_validity")
     with pytest.raises(InvalidValueError, match="`bridge_params` must name sim_bridge parameters"):

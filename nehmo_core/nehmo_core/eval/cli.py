@@ -30,6 +30,7 @@ from nehmo_core.eval.metrics import format_metrics
 from nehmo_core.eval.report import markdown_table, setup_summary, write_summary
 from nehmo_core.eval.scenario_sets import scenario_set_for
 from nehmo_core.eval.setups import SETUPS, get_setup, parse_row, row_slug
+from nehmo_core.eval.stalls import SYNTAX as STALLS_SYNTAX
 from nehmo_core.eval.stalls import Stalls, parse_stalls
 from nehmo_core.planning.models.registry import parse_value_models, snapshot_value_models
 from nehmo_core.planning.settings import PlannerSettings, parse_assignments
@@ -124,12 +125,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--stalls",
         type=parse_stalls,
         default=Stalls(),
-        metavar="RATE[,MAX_TICKS[,PROCESSES[,HOLD_TICKS[,expire]]]]",
+        metavar=STALLS_SYNTAX,
         help="overloaded planner processes (stress test, nehmo_core.eval.stalls): each tick a "
         "process stalls with chance RATE for 1..MAX_TICKS periods (default 5); arms spread over "
         "PROCESSES (0: one each); a command drives its arm for HOLD_TICKS periods (default 1, "
-        "the bridge's command_validity; 5: a 0.2 s watchdog only); 'expire': a late tick "
-        "publishes zero, not its stale plan",
+        "the bridge's command_validity; 5: a 0.2 s watchdog only); a late tick publishes zero "
+        "('expire', the default, as arm_planner does) or its stale plan ('send')",
     )
     parser.add_argument(
         "--time-limit",

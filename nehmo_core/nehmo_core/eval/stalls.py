@@ -9,9 +9,10 @@ meanwhile is the actuator side's rule, and what the late tick publishes is the p
   command for **one** period, so holding it longer moves the arm on a command nobody checked.
   The default, 1, is the bridge's ``command_validity`` (0.06 s: one period plus jitter); 5 is
   a controller with only the 0.2 s watchdog (the bridge before ``command_validity``);
-* the late tick publishes the solve it had started before the stall, planned from an
-  observation several periods old, unless ``expire_stale`` replaces such a command (planned more
-  than one period before it is published) by zero.
+* the late tick has the solve it had started before the stall, planned from an observation
+  several periods old; with ``expire_stale`` (the default, as ``arm_planner``'s ``late_plan``
+  rule) it publishes zero instead of a command planned more than one period before, without it
+  it publishes that command.
 
 :class:`Stalls` states the model: each tick every planner process that is not stalled starts a
 stall with probability ``rate``, lasting 1 to ``max_ticks`` periods (uniform), during which its
@@ -29,7 +30,7 @@ import numpy as np
 
 from nehmo_core.errors import InvalidValueError
 
-__all__ = ["StallSchedule", "Stalls", "parse_stalls"]
+__all__ = ["SYNTAX", "StallSchedule", "Stalls", "parse_stalls"]
 
 
 @dataclass(frozen=True)
@@ -40,7 +41,7 @@ class Stalls:
     max_ticks: int = 5  # a stall lasts 1..max_ticks periods
     processes: int = 0  # planner processes the arms are spread over (0: one per arm)
     hold_ticks: int = 1  # periods a command drives its arm after it arrives (5: 0.2 s)
-    expire_stale: bool = False  # a command planned > 1 period before it is published: zero
+    expire_stale: bool = True  # a command planned > 1 period before it is published: zero
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.rate <= 1.0:
@@ -58,23 +59,23 @@ class Stalls:
         return asdict(self)
 
 
+SYNTAX = "RATE[,MAX_TICKS[,PROCESSES[,HOLD_TICKS[,expire|send]]]]"
+
+
 def parse_stalls(text: str) -> Stalls:
-    """``RATE[,MAX_TICKS[,PROCESSES[,HOLD_TICKS[,expire]]]]``, e.g. ``0.05,5,2,1,expire``."""
+    """:data:`SYNTAX`, e.g. ``0.05,5,2,1``; ``send``: a late tick sends its stale plan."""
     parts = [p.strip() for p in text.split(",")]
-    expire = parts[-1] == "expire"
-    if expire:
+    expire = parts[-1] != "send"
+    if parts[-1] in ("expire", "send"):
         parts = parts[:-1]
     if not 1 <= len(parts) <= 4:
-        raise InvalidValueError(
-            "--stalls", "must be RATE[,MAX_TICKS[,PROCESSES[,HOLD_TICKS[,expire]]]]", text
-        )
+        raise InvalidValueError("--stalls", f"must be {SYNTAX}", text)
     try:
         rate = float(parts[0])
         ints = [int(p) for p in parts[1:]]
     except ValueError:
-        raise InvalidValueError(
-            "--stalls", "must be a rate then integers (and 'expire' last)", text
-        ) from None
+        rule = "must be a rate then integers (and 'expire' or 'send' last)"
+        raise InvalidValueError("--stalls", rule, text) from None
     names = ("max_ticks", "processes", "hold_ticks")
     return Stalls(rate, expire_stale=expire, **dict(zip(names, ints, strict=False)))
 
