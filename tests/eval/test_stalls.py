@@ -107,3 +107,32 @@ def test_parse_stalls_reads_the_option_and_rejects_bad_text() -> None:
         parse_stalls("1.5")
     with pytest.raises(InvalidValueError, match=r"`stalls\.hold_ticks` must be >= 1"):
         parse_stalls("0.1,5,0,0")
+
+
+@pytest.mark.parametrize(
+    ("rules", "collides"),
+    [(Stalls(0.08, 8, 2, 5, False), True), (Stalls(0.08, 8, 2, 1, True), False)],
+    ids=["before_late_tick_rules", "with_them"],
+)
+def test_stalled_processes_collide_without_the_late_tick_rules_and_not_with_them(
+    rules: Stalls, collides: bool
+) -> None:
+    """Five NeHMO UR5s in two stalled processes (scenario 48 of seed 99, whose stalls the
+    closed loop draws from its start): an arm kept on its last command for five periods and
+    then on a plan made before the stall hits a peer within a second; with the bridge's
+    command validity and the planner's ``late_plan`` rule the episode ends without collision.
+    (Solves have no wall-clock deadline here, so the run does not depend on the machine.)"""
+    from nehmo_core.eval.planners import build_planners
+    from nehmo_core.eval.scenario_sets import scenario_set_for
+    from nehmo_core.eval.setups import get_setup
+    from nehmo_core.planning.models.registry import ModelRegistry
+    from nehmo_core.planning.settings import PlannerSettings
+
+    setup = get_setup("five_ur5")
+    scenario = scenario_set_for(setup, seed=99, count=49).scenarios[48]
+    settings = PlannerSettings().override({"opt.deadline": 3600.0})
+    kinds = dict.fromkeys(CELL.arm_ids, "nehmo")
+    planners = build_planners(CELL, kinds, scenario, 0.04, ModelRegistry(), settings)
+    result = run_episode(CELL, scenario, planners, EpisodeSettings.for_setup(setup, stalls=rules))
+    assert (result.outcome == "collision") == collides, (result.outcome, result.ticks)
+    assert result.outcome != "collision" or result.ticks < 50
