@@ -9,7 +9,9 @@ pair and every arm's self-collision exactly at ``substeps`` instants (4 at 25 Hz
 the authors' spacing). Speed bounds announced by NeHMO planners with their commands (see
 :mod:`~nehmo_core.planning.stages.speed_bounds`) are heard by the others at the next tick and
 checked against the observed motion. The episode stops at the first collision, when every arm is
-within the tolerance of its goal (checked at tick boundaries), or at the time limit.
+within the tolerance of its goal (checked at tick boundaries), or at the time limit. With
+``EpisodeSettings.stalls`` (off by default) planner processes stall now and then, as on an
+overloaded machine (:mod:`nehmo_core.eval.stalls`).
 """
 
 from __future__ import annotations
