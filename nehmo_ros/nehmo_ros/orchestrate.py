@@ -165,20 +165,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _split(text: str, option: str) -> tuple[str, str]:
+    """``NAME=VALUE`` as its name and its raw value; an error naming ``option`` otherwise."""
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise InvalidValueError(option, "must be NAME=VALUE", text)
+    return name.strip(), value.strip()
+
+
 def _assignment(text: str, option: str = "--bridge-param") -> tuple[str, object]:
     """``NAME=VALUE`` with VALUE read as a YAML scalar (0.2, true, text)."""
     import yaml
 
-    name, sep, value = text.partition("=")
-    if not sep or not name.strip():
-        raise InvalidValueError(option, "must be NAME=VALUE", text)
-    return name.strip(), yaml.safe_load(value)
+    name, value = _split(text, option)
+    return name, yaml.safe_load(value)
 
 
 def _ros_param(text: str) -> str:
     """``NAME=VALUE`` as a ``--ros-args -p`` item, ``NAME:=VALUE``."""
-    name, _ = _assignment(text, "--planner-param")  # checks the form
-    return f"{name}:={text.partition('=')[2].strip()}"
+    name, value = _split(text, "--planner-param")
+    return f"{name}:={value}"
 
 
 def _run(args: argparse.Namespace) -> int:
