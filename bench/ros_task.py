@@ -33,6 +33,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -82,10 +83,14 @@ class PlannerUsage(threading.Thread):
             self.peak_pss_mb = max(self.peak_pss_mb, total_kb / 1024)
 
 
-def run(task: Path, out: Path, processes: int, rtf: float = 1.0) -> dict[str, Any]:
+def run(
+    task: Path, out: Path, processes: int, rtf: float = 1.0, bridge: Sequence[str] = ()
+) -> dict[str, Any]:
     argv = [sys.executable, "-m", "nehmo_ros.orchestrate", "run", "--task", str(task)]
     argv += ["--planner-processes", str(processes), "--out", str(out)]
     argv += ["--real-time-factor", str(rtf)]
+    for param in bridge:
+        argv += ["--bridge-param", param]
     usage = PlannerUsage()
     usage.start()
     start = time.monotonic()
@@ -183,6 +188,13 @@ def main() -> int:
     parser.add_argument(
         "--real-time-factors", default="1", help="the bridge's real-time factors, comma-separated"
     )
+    parser.add_argument(
+        "--bridge-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a sim_bridge parameter for every run (orchestrate --bridge-param; repeatable)",
+    )
     parser.add_argument("--keep", help="directory for the bags and the process outputs")
     parser.add_argument("--results", default=str(RESULTS), help="where the report goes")
     args = parser.parse_args()
@@ -198,13 +210,14 @@ def main() -> int:
         for repeat in range(args.repeats):
             for rtf in rtfs:
                 for k in layouts:
-                    r = run(args.task, root / f"layout{k}_rtf{rtf:g}_run{repeat}", k, rtf)
+                    r = run(args.task, root / f"layout{k}_rtf{rtf:g}_run{repeat}", k, rtf, args.bridge_param)
                     runs.append({**r, "repeat": repeat})
                     print(f"{r['layout']} at RTF {rtf:g}, run {repeat}: {r['outcome']}", flush=True)
     command = f"python bench/ros_task.py {args.task.name} --name {args.name}"
     command += f" --layouts {args.layouts} --repeats {args.repeats}"
     if args.real_time_factors != "1":
         command += f" --real-time-factors {args.real_time_factors}"
+    command += "".join(f" --bridge-param {p}" for p in args.bridge_param)
     result = {
         "task": args.task.name,
         "arms": len(load_task(args.task).cell.arm_ids),

@@ -84,6 +84,7 @@ from nehmo_ros.node_support import (
     refuse_renamed,
     require_text,
     run_main,
+    settle_heap,
 )
 from nehmo_ros.pause import PauseServices
 from nehmo_ros.planner_report import WARN_EVERY, PlannerReports
@@ -197,6 +198,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
         self.timer: Any = None  # the command timer while active
         self._last_publish: float | None = None
         self._sent: tuple[float, int] | None = None  # (period [s], publish_wall_ns) of this tick
+        self._after: tuple[Decision, int] | None = None  # (decision, stamp) left for _after_tick
         if autostart:
             self._configure()  # errors stop the node with one line
             self.trigger_configure()
@@ -214,6 +216,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
 
     def on_activate(self, state: Any) -> TransitionCallbackReturn:
         self._ready, self._last_publish = False, None
+        self._after = None
         self.timer = self.create_timer(self.period, self._on_tick)
         self.get_logger().info("active: commanding")
         return TransitionCallbackReturn.SUCCESS
@@ -235,7 +238,7 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
     def _stop_commands(self) -> None:
         if self.timer is not None:
             self.destroy_timer(self.timer)
-            self.timer = None
+            self.timer = self._after = None
             self.command_pub.publish(Float64MultiArray(data=[0.0] * self.robot.dof))
             self.published["commands"] += 1
 
@@ -337,6 +340,8 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
         self.period = control.period
         self._entities = [e for e in self._owned() if e not in before]
         self.configured = True
+        log_msgs.typestore()  # the status codec, loaded now rather than in the first tick
+        settle_heap()  # what configure loaded stays out of the collector's walks while ticking
         self.get_logger().info(
             f"arm {arm_id} of cell {self.cell.name}: planner {p['planner']} (model "
             f"{p['model']}), {rate:g} Hz, deadline {deadline * 1e3:.1f} ms, peers "
@@ -367,22 +372,16 @@ class ArmPlannerNode(StateIntake, PlannerReports, LifecycleNode):
             self.published["commands"] += 1
 
     def _tick(self) -> None:
+        """The command first; the solve and the reports after the other nodes' commands."""
         stamp_ns = self.get_clock().now().nanoseconds
         self._read_states()
         self._sent = None
-        decision = self.controller.tick(time.monotonic(), stamp_ns, send=self._send)
-        self.goals.on_tick(decision)
-        self.markers.on_tick(decision)
-        if self._sent is None:
-            return
-        period, wall_ns = self._sent
-        if self.controller.announces:  # a planner that announces nothing stays silent
-            self.bound_pub.publish(Float64(data=self.controller.announcement))
-        status = self._status(decision, period, wall_ns, stamp_ns)
-        self.status_pub.publish(log_msgs.serialize(status))
-        self.published["statuses"] += 1
-        self._publish_diagnostics(status, stamp_ns)
-        self._report(decision)
+        decision = self.controller.tick(time.monotonic(), stamp_ns, send=self._send, solve=False)
+        self._after = (decision, stamp_ns)
+        if self.executor is None:  # not spun by an executor (tests): at once
+            self._on_after_tick()
+        else:
+            self.executor.create_task(self._on_after_tick)
 
     def _send(self, decision: Decision) -> None:
         """Publish the tick's command first, before the solve starts and before any report; its

@@ -43,15 +43,15 @@ import math
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
-from nehmo_core.errors import InvalidValueError, UnknownNameError
+from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.opt.interface import Planner, Telemetry
 from nehmo_core.planning.opt.peer_bounds import PeerBounds
-from nehmo_core.planning.settings import OptSettings
 from nehmo_core.robots.model import Cell
+from nehmo_ros.control_settings import STALE_POLICIES, ControlSettings, Counters
 from nehmo_ros.solve_worker import Decision, Observation, SolveWorker, zeros
 from nehmo_ros.state_buffer import StateBuffer, order_joints
 
@@ -63,50 +63,6 @@ __all__ = [
     "Observation",
     "StateBuffer",
 ]
-
-STALE_POLICIES = ("fail_safe", "hold")
-
-
-@dataclass(frozen=True)
-class ControlSettings:
-    """Rate [Hz], staleness timeout [s], what a stale peer triggers, and the jump test; speed
-    bounds (commands clipped to ``opt.u_max``, jumps beyond ``opt.d_max`` + ``jump_margin``) and
-    the solve budget (``opt.deadline``) are the planner's ``opt`` settings."""
-
-    rate: float = 25.0
-    peer_timeout: float = 0.25  # a joint state older than this is stale
-    stale_policy: str = "hold"
-    jump_margin: float = 0.1  # [rad] slack of the jump test (inf: no jump test)
-    plan_age: float = 1.5  # [periods] a plan of older observations is not sent (inf: off)
-    opt: OptSettings = field(default_factory=OptSettings)  # the planner's: u_max, d_max
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.rate) and 0 < self.rate <= 1000):
-            raise InvalidValueError("rate", "must lie in (0, 1000] Hz", self.rate)
-        if not self.peer_timeout > 0:
-            raise InvalidValueError("peer_timeout", "must be > 0 [s]", self.peer_timeout)
-        if self.stale_policy not in STALE_POLICIES:
-            raise UnknownNameError("stale_policy", self.stale_policy, STALE_POLICIES)
-        if not self.jump_margin > 0:
-            raise InvalidValueError("jump_margin", "must be > 0 [rad] (inf: off)", self.jump_margin)
-        if not self.plan_age > 1:
-            raise InvalidValueError("plan_age", "must be > 1 period (inf: off)", self.plan_age)
-
-    @property
-    def period(self) -> float:
-        return 1.0 / self.rate
-
-
-@dataclass
-class Counters:
-    """Running totals reported with every status message."""
-
-    ticks: int = 0
-    deadline_misses: int = 0
-    fail_safes: int = 0
-    holds: int = 0
-    solver_errors: int = 0
-    late_plans: int = 0
 
 
 class ArmController:
@@ -129,6 +85,7 @@ class ArmController:
         self._tick = 0
         self.last_observation: Observation | None = None
         self._submitted: Observation | None = None  # the job whose result is due next tick
+        self._due: Observation | None = None  # this tick's job, not yet submitted
         self._abandoned: int | None = None  # tick of a late job whose solve time is not out yet
         self._fallback_lock = threading.Lock()
         #: (tick, fail-safe, observation stamp [ns]) of the latest job
@@ -233,11 +190,16 @@ class ArmController:
 
     # -- the tick (timer thread) ------------------------------------------------------------
     def tick(
-        self, now: float, stamp_ns: int = 0, send: Callable[[Decision], None] | None = None
+        self,
+        now: float,
+        stamp_ns: int = 0,
+        send: Callable[[Decision], None] | None = None,
+        solve: bool = True,
     ) -> Decision:
-        """The command to publish now; starts the solve of this tick's observations. ``now``
-        [s] is monotonic time (staleness), ``stamp_ns`` the ROS time of the tick; ``send`` gets
-        the decision before that solve starts (the command need not share the interpreter)."""
+        """The command to publish now; starts the solve of this tick's observations (with
+        ``solve`` False, :meth:`start_solve` does, later in the same tick). ``now`` [s] is
+        monotonic time (staleness), ``stamp_ns`` the ROS time of the tick; ``send`` gets the
+        decision before that solve starts (the command need not share the interpreter)."""
         obs = self.observe(now, stamp_ns)
         if self._paused or self._resuming:
             return self._held_tick(obs, send)
@@ -246,10 +208,17 @@ class ArmController:
         self.last_observation = obs
         if send is not None:
             send(decision)
-        if self._worker.submit(obs := replace(obs, in_flight=decision.velocity)):
-            self._submitted = obs
+        self._due = replace(obs, in_flight=decision.velocity)
+        if solve:
+            self.start_solve()
         self._tick += 1
         return decision
+
+    def start_solve(self) -> None:
+        """Start the solve that :meth:`tick` left for later (nothing if none is due)."""
+        due, self._due = self._due, None
+        if due is not None and self._worker.submit(due):
+            self._submitted = due
 
     def pause(self) -> None:
         """Hold the arm with zero commands and plan nothing until :meth:`resume`."""
@@ -270,7 +239,7 @@ class ArmController:
     ) -> Decision:
         """A tick while paused or resuming: zero, every plan made before the pause dropped."""
         self._worker.take()  # a result planned before the pause is never commanded
-        self._submitted = None
+        self._submitted = self._due = None
         status = "paused" if self._paused else "resuming"
         decision = Decision(
             zeros(self.robot.dof), status, hold=True, tick=obs.tick, observation_ns=obs.stamp_ns

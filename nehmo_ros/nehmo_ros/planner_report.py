@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from std_msgs.msg import Float64
+
 from nehmo_core.eval.telemetry import stamp, status_message
 from nehmo_core.logs import messages as log_msgs
 from nehmo_ros.solve_worker import Decision
@@ -36,8 +38,46 @@ class PlannerReports:
     fault: str
     controller: Any
     diagnostics_pub: Any
+    bound_pub: Any
+    status_pub: Any
+    goals: Any
+    markers: Any
+    published: dict[str, int]
     _diagnostics_due: int
+    _after: tuple[Decision, int] | None  # (decision, tick stamp [ns]) left for _after_tick
+    _sent: tuple[float, int] | None  # (period [s], publish_wall_ns) of this tick's command
     get_logger: Any  # the node's
+
+    def _on_after_tick(self) -> None:
+        try:
+            self._after_tick()
+        except Exception as err:  # as in _on_tick: report, never end the node
+            self.get_logger().error(
+                f"tick report failed ({type(err).__name__}: {err})",
+                throttle_duration_sec=WARN_EVERY,
+            )
+
+    def _after_tick(self) -> None:
+        """The second half of a tick, an executor task: start the solve, publish the reports.
+        The executor runs it after every timer already due, so the planner nodes of one process
+        (``arm_planners``) publish their commands of a tick before any of them solves or
+        reports."""
+        if self._after is None:
+            return
+        (decision, stamp_ns), self._after = self._after, None
+        self.controller.start_solve()
+        self.goals.on_tick(decision)
+        self.markers.on_tick(decision)
+        if self._sent is None:
+            return
+        period, wall_ns = self._sent
+        if self.controller.announces:  # a planner that announces nothing stays silent
+            self.bound_pub.publish(Float64(data=self.controller.announcement))
+        status = self._status(decision, period, wall_ns, stamp_ns)
+        self.status_pub.publish(log_msgs.serialize(status))
+        self.published["statuses"] += 1
+        self._publish_diagnostics(status, stamp_ns)
+        self._report(decision)
 
     def _publish_diagnostics(self, status: Any, stamp_ns: int) -> None:
         """The status on ``/diagnostics`` too, at most every ``DIAGNOSTICS_EVERY`` ticks."""

@@ -55,6 +55,12 @@ class SuiteSettings:
         if unknown:
             rule = f"must name sim_bridge parameters {sorted(BRIDGE_PARAMS)}"
             raise InvalidValueError("bridge_params", rule, unknown)
+        # ROS reads `50` as an integer, which a float parameter refuses: 50.0 is meant
+        floats = {k for k, p in BRIDGE_PARAMS.items() if isinstance(p.default, float)}
+        params = tuple(
+            (k, float(v) if k in floats and type(v) is int else v) for k, v in self.bridge_params
+        )
+        object.__setattr__(self, "bridge_params", params)
         if self.install_space and not (Path(self.install_space) / "setup.bash").is_file():
             raise InvalidValueError(
                 "install_space",

@@ -227,17 +227,19 @@ class SimBridgeNode(Node):
             pub.publish(self._joint_state(a, self.scenario.goal[a], empty, t_ns))
 
     def _publish_state(self, velocities: dict[str, np.ndarray]) -> None:
+        """The step's joint states, then the clock: a planner ticked by this clock reads the
+        states of this instant, and the bridge is done with its step before planners wake."""
         t_ns = self._stamp_ns()
-        if self.clock_pub is not None:
-            clock = Clock()
-            clock.clock.sec, clock.clock.nanosec = divmod(int(t_ns), 1_000_000_000)
-            self.clock_pub.publish(clock)
-            self.published["clock"] += 1
         # what sensors read (noisy with a realistic actuator model) and how fast each arm moves
         observed, moving = self.sim.observed(), self.sim.velocities(velocities)
         for a, pub in self.state_pubs.items():
             pub.publish(self._joint_state(a, observed[a], moving[a], t_ns))
         self.published["joint_states_per_arm"] += 1
+        if self.clock_pub is not None:
+            clock = Clock()
+            clock.clock.sec, clock.clock.nanosec = divmod(int(t_ns), 1_000_000_000)
+            self.clock_pub.publish(clock)
+            self.published["clock"] += 1
 
     def _now(self) -> float:
         """The watchdog's clock [s]: simulated time with ``sim_time``, else monotonic time."""

@@ -72,6 +72,34 @@ def test_the_command_is_sent_before_the_solve_of_its_tick_starts() -> None:
         c.stop()
 
 
+def test_a_tick_may_leave_its_solve_for_later_and_the_command_is_the_same() -> None:
+    """``tick(solve=False)`` starts nothing; ``start_solve`` then solves that tick's
+    observation (once, however often it is called), and the next command comes from it as if
+    the solve had started inside ``tick`` (the node ticks its arms of one process this way)."""
+    planner = RecordingPlanner()
+    c = _controller(planner)
+    try:
+        for k in range(3):
+            _feed(c, k * 0.04, q0=float(k))
+            decision = c.tick(k * 0.04, stamp_ns=k * 40_000_000, solve=False)
+            _wait_idle(c)
+            assert len(planner.calls) == k  # nothing started yet
+            c.start_solve()
+            c.start_solve()  # a second call has nothing left to start
+            _wait_idle(c)
+            assert len(planner.calls) == k + 1
+            if k:
+                assert decision.status == "optimal" and decision.tick == k - 1
+                assert decision.velocity[0] == pytest.approx((k - 1) * 0.01)
+        c.pause()
+        c.tick(0.12, solve=False)
+        c.start_solve()  # a paused tick leaves nothing to solve
+        _wait_idle(c)
+        assert len(planner.calls) == 3
+    finally:
+        c.stop()
+
+
 def test_a_command_carries_the_state_ages_of_its_own_observation() -> None:
     """The status reports the state ages the command was computed from (the previous tick's
     observation), not those seen at the tick that publishes it."""

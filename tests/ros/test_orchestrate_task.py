@@ -47,3 +47,7 @@ def test_bridge_parameters_pass_through_and_unknown_ones_are_refused() -> None:
     with pytest.raises(InvalidValueError, match="`bridge_params` must name sim_bridge parameters"):
         SuiteSettings(bridge_params=(("command_validty", 0.1),))
     assert SuiteSettings(bridge_params=(("command_validity", 0.1),)).bridge_params
+    # a whole number for a float parameter is the float (ROS would refuse the integer)
+    settings = SuiteSettings(bridge_params=(("physics_rate", 50), ("episode", 3)))
+    assert settings.bridge_params == (("physics_rate", 50.0), ("episode", 3))
+    assert type(settings.bridge_params[0][1]) is float

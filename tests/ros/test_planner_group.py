@@ -12,6 +12,7 @@ from __future__ import annotations
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from _ros_testutil import (
@@ -117,3 +118,59 @@ def test_the_grouped_episode_ends_as_the_batch_runner_does(
 ) -> None:
     batch = e2e_batch_reference(scenario_file)
     assert batch.outcome == grouped.result.outcome == "success"
+
+
+def test_nodes_of_one_process_send_every_command_of_a_tick_before_any_solve_or_report(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Two planner nodes in one process ticked by one simulated clock: in every tick, both
+    commands go out before either node starts its solve or publishes its status, on the
+    executor the nodes run in (``events``)."""
+    import rclpy.node
+    from _ros_testutil import in_process, spin_until
+    from rosgraph_msgs.msg import Clock
+
+    from nehmo_ros.arm_planner import ArmPlannerNode
+    from nehmo_ros.node_support import make_executor
+
+    monkeypatch.delenv("NEHMO_EXECUTOR", raising=False)
+    params = ["cell:=dual_ur5", "planner:=naive", "use_sim_time:=true"]
+    with in_process("arm_planners", params):
+        executor = make_executor()
+        nodes = [ArmPlannerNode(f"arm_planner_{a}", {"arm_id": a}) for a in CELL.arm_ids]
+        clock = rclpy.node.Node("clock")
+        clock_pub = clock.create_publisher(Clock, "/clock", 10)
+        events: list[tuple[int, str, str]] = []  # (tick stamp [ns], what, arm)
+
+        def logged(what: str, node: Any, call: Any) -> Any:
+            def wrapped(*args: Any) -> Any:
+                events.append((node.controller.last_observation.stamp_ns, what, node.arm_id))
+                return call(*args)
+
+            return wrapped
+
+        for node in nodes:
+            monkeypatch.setattr(node, "_send", logged("send", node, node._send))
+            solve = logged("solve", node, node.controller.start_solve)
+            monkeypatch.setattr(node.controller, "start_solve", solve)
+            executor.add_node(node)
+        executor.add_node(clock)
+        try:
+            for k in range(1, 13):  # the clock steps 20 ms, ticks are due every 40 ms
+                msg = Clock()
+                msg.clock.sec, msg.clock.nanosec = divmod(k * 20_000_000, 1_000_000_000)
+                clock_pub.publish(msg)
+                spin_until(executor, 0.3)
+        finally:
+            for node in [*nodes, clock]:
+                executor.remove_node(node)
+                node.destroy_node()
+            executor.shutdown()
+    ticks = sorted({t for t, _, _ in events})
+    assert len(ticks) >= 4, events
+    for tick in ticks:
+        these = [(what, arm) for t, what, arm in events if t == tick]
+        assert sorted(these) == sorted(
+            [("send", a) for a in CELL.arm_ids] + [("solve", a) for a in CELL.arm_ids]
+        ), these
+        assert [w for w, _ in these] == ["send", "send", "solve", "solve"], these
