@@ -32,8 +32,8 @@ import sys
 import tempfile
 import threading
 import time
-from pathlib import Path
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -210,7 +210,13 @@ def main() -> int:
         for repeat in range(args.repeats):
             for rtf in rtfs:
                 for k in layouts:
-                    r = run(args.task, root / f"layout{k}_rtf{rtf:g}_run{repeat}", k, rtf, args.bridge_param)
+                    r = run(
+                        args.task,
+                        root / f"layout{k}_rtf{rtf:g}_run{repeat}",
+                        k,
+                        rtf,
+                        args.bridge_param,
+                    )
                     runs.append({**r, "repeat": repeat})
                     print(f"{r['layout']} at RTF {rtf:g}, run {repeat}: {r['outcome']}", flush=True)
     command = f"python bench/ros_task.py {args.task.name} --name {args.name}"
