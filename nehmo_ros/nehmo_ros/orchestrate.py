@@ -44,7 +44,7 @@ from nehmo_core.sim.scenario_files import draw_scenario_set, load_scenario_set, 
 from nehmo_ros.oneline import one_line
 from nehmo_ros.replay import replay
 from nehmo_ros.suite import format_metrics, run_suite
-from nehmo_ros.suite_settings import SuiteSettings
+from nehmo_ros.suite_settings import SuiteSettings, layout_hint
 
 __all__ = ["build_parser", "main"]
 
@@ -206,6 +206,9 @@ def _run(args: argparse.Namespace) -> int:
             arg for text in args.planner_param for arg in ("-p", _ros_param(text))
         ),
     )
+    arms = len(load_scenario_set(scenario_file).scenarios[0].start)
+    if hint := layout_hint(arms, settings):
+        print(f"orchestrate: note: {hint}", file=sys.stderr, flush=True)
     summary = run_suite(scenario_file, _episodes(args.episodes, count), out_dir, settings)
     print(format_metrics(summary["metrics"]))
     print(f"summary: {out_dir / 'summary.json'}")

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from nehmo_core.errors import InvalidValueError, UnknownNameError
 
-__all__ = ["SuiteSettings", "check_row_and_model"]
+__all__ = ["SuiteSettings", "check_row_and_model", "layout_hint"]
 
 
 @dataclass(frozen=True)
@@ -88,3 +89,20 @@ def check_row_and_model(planner: str, model: str) -> None:
                 f"{sorted(SHIPPED_VALUE_FUNCTIONS)} or an existing path, per [KIND=]SOURCE item",
                 str(source),
             )
+
+
+def layout_hint(arms: int, settings: SuiteSettings, cores: int | None = None) -> str:
+    """A note for a run whose layout was measured to miss many 25 Hz periods at real time, ''
+    otherwise: more than three arms per core, planned in more processes than cores or with the
+    bridge stepping faster than 50 Hz (eight arms on 2 cores: ``docs/ros2.md``, several planners
+    in one process)."""
+    cores = cores or os.cpu_count() or 1
+    processes = arms if settings.planner_processes == 0 else min(settings.planner_processes, arms)
+    if arms <= 3 * cores or (processes <= cores and settings.physics_rate <= 50):
+        return ""
+    return (
+        f"{arms} arms in {processes} planner process{'es' if processes > 1 else ''} with "
+        f"{settings.physics_rate:g} Hz physics on {cores} core{'s' if cores > 1 else ''} miss "
+        f"many 25 Hz periods at real time; --planner-processes {cores} --physics-rate 50 keeps "
+        "most (docs/ros2.md, several planners in one process)"
+    )

@@ -51,3 +51,18 @@ def test_bridge_parameters_pass_through_and_unknown_ones_are_refused() -> None:
     settings = SuiteSettings(bridge_params=(("physics_rate", 50), ("episode", 3)))
     assert settings.bridge_params == (("physics_rate", 50.0), ("episode", 3))
     assert type(settings.bridge_params[0][1]) is float
+
+
+def test_a_layout_measured_to_miss_25_hz_gets_a_note() -> None:
+    """Eight arms on 2 cores in eight processes, or at 100 Hz physics, get the measured
+    advice; five arms, or eight composed at 50 Hz, get none."""
+    from nehmo_ros.suite_settings import layout_hint
+
+    assert layout_hint(5, SuiteSettings(), cores=2) == ""
+    note = layout_hint(8, SuiteSettings(), cores=2)
+    assert note.startswith("8 arms in 8 planner processes with 100 Hz physics on 2 cores")
+    assert "--planner-processes 2 --physics-rate 50" in note
+    assert layout_hint(8, SuiteSettings(planner_processes=2), cores=2)  # 100 Hz
+    assert layout_hint(8, SuiteSettings(planner_processes=2, physics_rate=50.0), cores=2) == ""
+    assert layout_hint(8, SuiteSettings(planner_processes=1, physics_rate=50.0), cores=2) == ""
+    assert layout_hint(8, SuiteSettings(), cores=4) == ""
