@@ -13,7 +13,8 @@ self-collision exactly (pairs that provably do not touch skip the exact query:
   on every step that collides;
 - ``/clock`` (rosgraph_msgs/Clock) when ``sim_time`` is true: simulated time, 0 at the start of
   the episode, paced at ``real_time_factor`` × wall time. Other nodes then run with
-  ``use_sim_time:=true``. Without ``sim_time`` the stamps are wall time and
+  ``use_sim_time:=true``; each step's clock goes out after its joint states, so a node woken by
+  it reads the states of that instant. Without ``sim_time`` the stamps are wall time and
   ``real_time_factor`` must be 1.
 
 It subscribes to ``/<arm>/velocity_controller/commands`` (std_msgs/Float64MultiArray, one value per
