@@ -191,7 +191,8 @@ def _run(args: argparse.Namespace) -> int:
     out_dir = Path(args.out).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     scenario_file = scenario_file_for(args, out_dir)
-    count = len(load_scenario_set(scenario_file))
+    scenarios = load_scenario_set(scenario_file)
+    count = len(scenarios)
     settings = SuiteSettings(
         planner=args.planner,
         model=args.model,
@@ -206,8 +207,7 @@ def _run(args: argparse.Namespace) -> int:
             arg for text in args.planner_param for arg in ("-p", _ros_param(text))
         ),
     )
-    arms = len(load_scenario_set(scenario_file).scenarios[0].start)
-    if hint := layout_hint(arms, settings):
+    if hint := layout_hint(len(scenarios.scenarios[0].start), settings):
         print(f"orchestrate: note: {hint}", file=sys.stderr, flush=True)
     summary = run_suite(scenario_file, _episodes(args.episodes, count), out_dir, settings)
     print(format_metrics(summary["metrics"]))

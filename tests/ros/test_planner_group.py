@@ -22,6 +22,8 @@ from _ros_testutil import (
     child_env,
     e2e_batch_reference,
     e2e_scenarios,
+    in_process,
+    spin_until,
 )
 
 from nehmo_core.errors import InvalidValueError
@@ -127,7 +129,6 @@ def test_nodes_of_one_process_send_every_command_of_a_tick_before_any_solve_or_r
     commands go out before either node starts its solve or publishes its status, on the
     executor the nodes run in (``events``)."""
     import rclpy.node
-    from _ros_testutil import in_process, spin_until
     from rosgraph_msgs.msg import Clock
 
     from nehmo_ros.arm_planner import ArmPlannerNode
