@@ -28,7 +28,8 @@ def test_off_with_the_stage_and_in_the_paper_preset() -> None:
 def test_a_command_whose_rest_pose_reaches_a_near_peer_is_braked() -> None:
     """Moving at 0.5 rad/s, a UR5 (5 rad/s²) travels 0.045 rad per joint before it stops: a
     command that keeps the arm clear now but not at rest is replaced by the hardest braking
-    (0.2 rad/s less on every joint); moving away, or with the check off, it is kept."""
+    (0.2 rad/s less on every joint); moving away, against a peer that holds (1 cm), or with the
+    check off, it is kept."""
     registry = ModelRegistry()
     settings = PlannerSettings().override({"actuator.enabled": True, "opt.deadline": 3600.0})
     planner = NehmoPlanner(DUAL, A, registry.models_for("nehmo", DUAL), settings)
@@ -44,6 +45,17 @@ def test_a_command_whose_rest_pose_reaches_a_near_peer_is_braked() -> None:
     np.testing.assert_allclose(braked, toward - np.sign(toward) * 0.2)
     stage.last = -toward  # type: ignore[attr-defined]
     np.testing.assert_allclose(stage.filter(tick, now, -toward), -toward)  # type: ignore[attr-defined]
+    # the rest pose comes to 3 cm: against a peer that holds (announced a bound below full
+    # speed), the clearance is the contact guard's holding clearance, 1 cm, and the command stands
+    holding = read_tick(planner, q, peers, q, {B: 0.2}, {B: 0.2})
+    assert holding.holds(B)
+    stage.last = toward.copy()  # type: ignore[attr-defined]
+    np.testing.assert_allclose(stage.filter(holding, now, toward), toward)  # type: ignore[attr-defined]
+    tight = settings.override({"contact.holding_clearance": 0.04})
+    strict = NehmoPlanner(DUAL, A, registry.models_for("nehmo", DUAL), tight).stage("actuator")
+    strict.last = toward.copy()  # type: ignore[attr-defined]
+    braked = strict.filter(holding, now, toward)  # type: ignore[attr-defined]
+    np.testing.assert_allclose(braked, toward - np.sign(toward) * 0.2)
     off = NehmoPlanner(
         DUAL,
         A,
