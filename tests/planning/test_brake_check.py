@@ -28,8 +28,8 @@ def test_off_with_the_stage_and_in_the_paper_preset() -> None:
 def test_a_command_whose_rest_pose_reaches_a_near_peer_is_braked() -> None:
     """Moving at 0.5 rad/s, a UR5 (5 rad/s²) travels 0.045 rad per joint before it stops: a
     command that keeps the arm clear now but not at rest is replaced by the hardest braking
-    (0.2 rad/s less on every joint); moving away, against a peer that holds (1 cm), or with the
-    check off, it is kept."""
+    (0.2 rad/s less on every joint); moving away, or with the check off, it is kept. In the
+    slow game (both arms hold, the command within the hold's speed) the clearance is 1 cm."""
     registry = ModelRegistry()
     settings = PlannerSettings().override({"actuator.enabled": True, "opt.deadline": 3600.0})
     planner = NehmoPlanner(DUAL, A, registry.models_for("nehmo", DUAL), settings)
@@ -45,17 +45,26 @@ def test_a_command_whose_rest_pose_reaches_a_near_peer_is_braked() -> None:
     np.testing.assert_allclose(braked, toward - np.sign(toward) * 0.2)
     stage.last = -toward  # type: ignore[attr-defined]
     np.testing.assert_allclose(stage.filter(tick, now, -toward), -toward)  # type: ignore[attr-defined]
-    # the rest pose comes to 3 cm: against a peer that holds (announced a bound below full
-    # speed), the clearance is the contact guard's holding clearance, 1 cm, and the command stands
+    # at full speed the clearance stays 4 cm against a peer that holds, too
     holding = read_tick(planner, q, peers, q, {B: 0.2}, {B: 0.2})
     assert holding.holds(B)
+    holding.announced = 0.2
     stage.last = toward.copy()  # type: ignore[attr-defined]
-    np.testing.assert_allclose(stage.filter(holding, now, toward), toward)  # type: ignore[attr-defined]
-    tight = settings.override({"contact.holding_clearance": 0.04})
-    strict = NehmoPlanner(DUAL, A, registry.models_for("nehmo", DUAL), tight).stage("actuator")
-    strict.last = toward.copy()  # type: ignore[attr-defined]
-    braked = strict.filter(holding, now, toward)  # type: ignore[attr-defined]
+    braked = stage.filter(holding, now, toward)  # type: ignore[attr-defined]
     np.testing.assert_allclose(braked, toward - np.sign(toward) * 0.2)
+    # the slow game: 3.4 cm apart, creeping closer at the hold's speed (0.1 rad/s) to a rest
+    # pose 3.0 cm away: against a peer that holds while this arm holds too, the clearance is
+    # the contact guard's holding clearance (1 cm) and the command stands; announcing full
+    # speed, or against a peer at full speed, it brakes (to a stop: the band reaches zero)
+    near_q = q + 0.04 * np.sign(toward)
+    creep = 0.1 * np.sign(toward)
+    near_now = planner.current(near_q, peers, {B: 1.0})
+    for bound, own, kept in ((0.2, 0.2, True), (0.2, 1.0, False), (1.0, 0.2, False)):
+        tick = read_tick(planner, near_q, peers, near_q, {B: bound}, {B: bound})
+        tick.announced = own
+        stage.last = creep.copy()  # type: ignore[attr-defined]
+        out = stage.filter(tick, near_now, creep)  # type: ignore[attr-defined]
+        np.testing.assert_allclose(out, creep if kept else np.zeros(6))
     off = NehmoPlanner(
         DUAL,
         A,

@@ -47,6 +47,7 @@ from __future__ import annotations
 import numpy as np
 
 from nehmo_core.errors import InvalidValueError
+from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.problem import LinearRows
 from nehmo_core.planning.opt.tick import PeerValues, Tick
@@ -136,7 +137,7 @@ class AccelLimits(WorldFilter):
             return u
         world, arm = self._lease.world, self.host.arm_id
         world.set_configuration(near)
-        clearance = {p: self._clearance(tick, p) for p in near}
+        clearance = {p: self._clearance(tick, p, u) for p in near}
         cutoff = max(clearance.values()) + 0.05
         world.set_joint_positions(arm, self._rest(tick.q, u))
         inside = {p: d for p in near if (d := world.distance(arm, p, cutoff)) < clearance[p]}
@@ -149,13 +150,16 @@ class AccelLimits(WorldFilter):
         self.braked += 1
         return self._hardest_braking()
 
-    def _clearance(self, tick: Tick, peer: str) -> float:
-        """The braking clearance [m] against ``peer``: against one that holds (announced a
-        bound below full speed) at most the contact guard's ``holding_clearance``, as it
-        closes the gap slower; an arm brakes no farther from a settled peer than the contact
-        guard lets it come (five UR5s stopped 0.03-0.06 rad short of goals beside one)."""
+    def _clearance(self, tick: Tick, peer: str, u: np.ndarray) -> float:
+        """The braking clearance [m] against ``peer``. In the slow game (``peer`` holds, this
+        arm announces a hold too and ``u`` keeps within the hold's speed) at most the contact
+        guard's ``holding_clearance``: with 4 cm, five UR5s stopped 0.03-0.06 rad short of
+        goals beside a settled peer. An arm moving faster keeps ``brake_clearance``: at full
+        speed, a Kinova that braked only 1 cm before a holding UR5 reached its base (latency
+        and the acceleration band carried it the last centimetre)."""
         s = self.host.settings
-        if tick.holds(peer):
+        slow = float(np.abs(u).max()) <= s.hold.bound * s.opt.u_max * (1.0 + 1e-9)
+        if slow and tick.announced < FULL_SPEED and tick.holds(peer):
             return min(s.actuator.brake_clearance, s.contact.holding_clearance)
         return s.actuator.brake_clearance
 
