@@ -164,7 +164,7 @@ class ActuatorSettings:
     limit (the robot description's ``facts.accel_limits``) reaches in one ``opt.tick``, V
     against each peer falls no faster than ``approach_rate`` times its gap above the margin, and
     the arm brakes when its rest pose would come within ``brake_clearance`` of a near peer
-    (against a peer that holds, at most ``contact.holding_clearance``).
+    (in the slow game, both arms holding, at most ``contact.holding_clearance``).
     """
 
     enabled: bool = setting(
@@ -181,12 +181,12 @@ class ActuatorSettings:
     )
     # the learned V read 2 cm above the real distance near contact and a UR5 at 0.5 rad/s
     # closed 1.5 cm per tick while it braked (five UR5, realistic actuators, development
-    # seed 60, scenario 32); against a holding peer at most contact.holding_clearance: 4 cm
-    # stopped arms short of goals beside settled peers (five UR5, development seeds 60, 67)
+    # seed 60, scenario 32); in the slow game at most contact.holding_clearance: 4 cm stopped
+    # arms short of goals beside settled peers (five UR5, development seeds 60, 67)
     brake_clearance: float = setting(
         0.04,
-        "real distance the arm's braking path keeps to near peers (0: off); to a peer that "
-        "holds, at most contact.holding_clearance",
+        "real distance the arm's braking path keeps to near peers (0: off); in the slow game "
+        "(both arms hold, at the hold's speed) at most contact.holding_clearance",
         "m",
         ge=0,
         le=1,

@@ -29,9 +29,10 @@ real geometry (the cell's shared PyBullet world), where the arm comes to rest if
 command for one tick and then brakes at its limits, against every peer whose V reads below
 ``brake_near`` (posed where they are now). If that rest pose comes closer to a peer than
 ``brake_clearance`` (and than now, where the arms are already closer), the arm brakes as hard as
-it can instead. Against a peer that holds (announced a bound below full speed) the clearance is
-at most ``contact.holding_clearance``, as in the contact guard: with 4 cm, arms stopped short of
-goals that lie beside a settled peer.
+it can instead. In the slow game (the peer holds, i.e. announced a bound below full speed, this
+arm announces a hold too and its command keeps within the hold's speed) the clearance is at most
+``contact.holding_clearance``, as in the contact guard: with 4 cm, arms stopped short of goals
+that lie beside a settled peer. At any higher speed it stays ``brake_clearance``.
 
 The band can also make Opt infeasible with no peer near: an arm moving fast beside its own links
 cannot turn as fast as the self-clearance rows ask. The paper's fail-safe then drives it at full
