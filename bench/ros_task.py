@@ -84,16 +84,11 @@ class PlannerUsage(threading.Thread):
 
 
 def run(
-    task: Path,
-    out: Path,
-    processes: int,
-    rtf: float = 1.0,
-    bridge: Sequence[str] = (),
-    planner_nice: int = 0,
+    task: Path, out: Path, processes: int, rtf: float = 1.0, bridge: Sequence[str] = ()
 ) -> dict[str, Any]:
     argv = [sys.executable, "-m", "nehmo_ros.orchestrate", "run", "--task", str(task)]
     argv += ["--planner-processes", str(processes), "--out", str(out)]
-    argv += ["--real-time-factor", str(rtf), "--planner-nice", str(planner_nice)]
+    argv += ["--real-time-factor", str(rtf)]
     for param in bridge:
         argv += ["--bridge-param", param]
     usage = PlannerUsage()
@@ -200,9 +195,6 @@ def main() -> int:
         metavar="NAME=VALUE",
         help="a sim_bridge parameter for every run (orchestrate --bridge-param; repeatable)",
     )
-    parser.add_argument(
-        "--planner-nice", type=int, default=0, help="orchestrate --planner-nice for every run"
-    )
     parser.add_argument("--keep", help="directory for the bags and the process outputs")
     parser.add_argument("--results", default=str(RESULTS), help="where the report goes")
     args = parser.parse_args()
@@ -224,7 +216,6 @@ def main() -> int:
                         k,
                         rtf,
                         args.bridge_param,
-                        args.planner_nice,
                     )
                     runs.append({**r, "repeat": repeat})
                     print(f"{r['layout']} at RTF {rtf:g}, run {repeat}: {r['outcome']}", flush=True)
@@ -233,8 +224,6 @@ def main() -> int:
     if args.real_time_factors != "1":
         command += f" --real-time-factors {args.real_time_factors}"
     command += "".join(f" --bridge-param {p}" for p in args.bridge_param)
-    if args.planner_nice:
-        command += f" --planner-nice {args.planner_nice}"
     result = {
         "task": args.task.name,
         "arms": len(load_task(args.task).cell.arm_ids),

@@ -126,13 +126,6 @@ def build_parser() -> argparse.ArgumentParser:
         "process per arm)",
     )
     run.add_argument(
-        "--planner-nice",
-        type=int,
-        default=0,
-        help="added niceness of the planner processes (0-19): the simulator's clock steps on "
-        "time on busy CPUs",
-    )
-    run.add_argument(
         "--bridge-param",
         action="append",
         default=[],
@@ -209,7 +202,6 @@ def _run(args: argparse.Namespace) -> int:
         domain_id=args.domain_id,
         install_space=args.install_space,
         planner_processes=args.planner_processes,
-        planner_nice=args.planner_nice,
         bridge_params=tuple(_assignment(text) for text in args.bridge_param),
         extra_planner_args=tuple(
             arg for text in args.planner_param for arg in ("-p", _ros_param(text))

@@ -18,7 +18,7 @@ import json
 import shutil
 import subprocess
 import time
-from collections.abc import Collection, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,7 +48,6 @@ __all__ = [
     "EpisodeRun",
     "error_line",
     "format_metrics",
-    "niceness",
     "planner_commands",
     "run_episode",
     "run_suite",
@@ -144,13 +143,6 @@ def planner_commands(
     ]
 
 
-def niceness(settings: SuiteSettings, name: str, planners: Collection[str]) -> int:
-    """The niceness added to process ``name`` (``planners``: the planner processes' names)."""
-    if name == "recorder":
-        return settings.nice + settings.recorder_nice
-    return settings.nice + (settings.planner_nice if name in planners else 0)
-
-
 def run_episode(
     scenario_file: Path,
     episode: int,
@@ -173,15 +165,13 @@ def run_episode(
     sim = {"use_sim_time": True}
     start = time.monotonic()
     codes: dict[str, int | None] = {}
-    planners = planner_commands(kinds, cell_ref, settings)
-    planner_names = {name for name, _ in planners}
     with started_processes() as procs:
         commands: dict[str, list[str]] = {}
 
         def launch(name: str, argv: list[str]) -> Process:
             commands[name] = argv
             (logs / "commands.json").write_text(json.dumps(commands, indent=1) + "\n")
-            nice = niceness(settings, name, planner_names)
+            nice = settings.nice + (settings.recorder_nice if name == "recorder" else 0)
             procs.append(Process(name, argv, env, logs / f"{name}.log", nice))
             return procs[-1]
 
@@ -198,7 +188,7 @@ def run_episode(
             reason = f"the recorder did not start: {error_line(recorder.output())}"
             codes["recorder"] = recorder.stop(settings.stop_timeout)
             return EpisodeRun(episode, log_path, EpisodeResult.failed(reason, kinds), codes, wall)
-        for name, argv in planners:
+        for name, argv in planner_commands(kinds, cell_ref, settings):
             launch(name, argv)
         # the planners start unconfigured; the lifecycle manager configures, then activates them
         manager_argv = node_command(

@@ -27,9 +27,6 @@ class SuiteSettings:
     #: Added niceness of the recorder on top of ``nice``: the planners and the bridge come first
     #: when the CPUs are busy; the recorder's deep reader history absorbs its delays.
     recorder_nice: int = 10
-    #: Added niceness of the planner processes on top of ``nice``: the bridge (the simulated
-    #: clock every planner ticks on) then steps on time when the CPUs are busy.
-    planner_nice: int = 0
     extra_planner_args: tuple[str, ...] = ()
     #: ``sim_bridge`` parameters set on top of the suite's (e.g. ``command_validity``).
     bridge_params: tuple[tuple[str, object], ...] = ()
@@ -42,9 +39,8 @@ class SuiteSettings:
     install_space: str = ""
 
     def __post_init__(self) -> None:
-        for name in ("recorder_nice", "planner_nice"):
-            if not 0 <= getattr(self, name) <= 19:
-                raise InvalidValueError(name, "must lie in [0, 19]", getattr(self, name))
+        if not 0 <= self.recorder_nice <= 19:
+            raise InvalidValueError("recorder_nice", "must lie in [0, 19]", self.recorder_nice)
         for name in ("time_limit", "physics_rate", "real_time_factor", "startup_timeout"):
             if not getattr(self, name) > 0:
                 raise InvalidValueError(name, "must be > 0", getattr(self, name))

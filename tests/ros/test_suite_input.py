@@ -37,18 +37,3 @@ def test_the_demo_checks_index_and_out_first(tmp_path: Path) -> None:
     with pytest.raises(UnknownNameError, match="planner"):
         demo_main(["--planner", "chomp", "--out", str(tmp_path / "d")])
     assert not (tmp_path / "d").exists()  # nothing written before the checks
-
-
-def test_niceness_per_process() -> None:
-    """The recorder and the planners get their own added niceness on top of ``nice``; the
-    bridge and the lifecycle manager only ``nice``; out of [0, 19] is refused by name."""
-    from nehmo_ros.suite import niceness
-
-    s = SuiteSettings(nice=1, recorder_nice=10, planner_nice=3)
-    planners = {"planner_ur5_0", "planner_ur5_1"}
-    assert niceness(s, "recorder", planners) == 11
-    assert niceness(s, "planner_ur5_1", planners) == 4
-    assert niceness(s, "sim_bridge", planners) == 1
-    assert niceness(SuiteSettings(), "planner_ur5_0", planners) == 0
-    with pytest.raises(InvalidValueError, match=r"`planner_nice` must lie in \[0, 19\]; got 20"):
-        SuiteSettings(planner_nice=20)
