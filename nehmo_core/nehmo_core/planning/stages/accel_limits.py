@@ -52,7 +52,7 @@ from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
 from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.problem import LinearRows
 from nehmo_core.planning.opt.tick import PeerValues, Tick
-from nehmo_core.planning.stages.exact_guard import WorldFilter
+from nehmo_core.planning.stages.exact_guard import WorldFilter, distances
 
 __all__ = ["AccelLimits"]
 
@@ -136,33 +136,34 @@ class AccelLimits(WorldFilter):
         }
         if not near:
             return u
-        world, arm = self._lease.world, self.host.arm_id
+        world, arm, peers = self._lease.world, self.host.arm_id, list(near)
         world.set_configuration(near)
-        clearance = {p: self._clearance(tick, p, u) for p in near}
-        cutoff = max(clearance.values()) + 0.05
-        world.set_joint_positions(arm, self._rest(tick.q, u))
-        inside = {p: d for p in near if (d := world.distance(arm, p, cutoff)) < clearance[p]}
-        if not inside:
+        clearance = self._clearances(tick, peers, u)
+        cutoff = float(clearance.max()) + 0.05
+        rest = distances(world, arm, self._rest(tick.q, u), peers, cutoff)
+        inside = rest < clearance
+        if not inside.any():
             return u
         # the distance now matters only to the peers the rest pose comes within clearance of
-        world.set_joint_positions(arm, tick.q)
-        if all(d >= world.distance(arm, p, cutoff) for p, d in inside.items()):
+        closer = [p for p, hit in zip(peers, inside, strict=True) if hit]
+        if (rest[inside] >= distances(world, arm, tick.q, closer, cutoff)).all():
             return u
         self.braked += 1
         return self._hardest_braking()
 
-    def _clearance(self, tick: Tick, peer: str, u: np.ndarray) -> float:
-        """The braking clearance [m] against ``peer``. In the slow game (``peer`` holds, this
-        arm announces a hold too and ``u`` keeps within the hold's speed) at most the contact
-        guard's ``holding_clearance``: with 4 cm, five UR5s stopped 0.03-0.06 rad short of
-        goals beside a settled peer. An arm moving faster keeps ``brake_clearance``: at full
-        speed, a Kinova that braked only 1 cm before a holding UR5 reached its base (latency
-        and the acceleration band carried it the last centimetre)."""
+    def _clearances(self, tick: Tick, peers: list[str], u: np.ndarray) -> np.ndarray:
+        """The braking clearance [m] against each of ``peers``. In the slow game (the peer
+        holds, this arm announces a hold too and ``u`` keeps within the hold's speed) at most
+        the contact guard's ``holding_clearance``: with 4 cm, five UR5s stopped 0.03-0.06 rad
+        short of goals beside a settled peer. An arm moving faster keeps ``brake_clearance``:
+        at full speed, a Kinova that braked only 1 cm before a holding UR5 reached its base
+        (latency and the acceleration band carried it the last centimetre)."""
         s = self.host.settings
-        slow = float(np.abs(u).max()) <= s.hold.bound * s.opt.u_max * (1.0 + 1e-9)
-        if slow and tick.announced < FULL_SPEED and tick.holds(peer):
-            return min(s.actuator.brake_clearance, s.contact.holding_clearance)
-        return s.actuator.brake_clearance
+        full = s.actuator.brake_clearance
+        hold_speed = s.hold.bound * s.opt.u_max * (1.0 + 1e-9)  # [rad/s]
+        slow = tick.announced < FULL_SPEED and float(np.abs(u).max()) <= hold_speed
+        held = min(full, s.contact.holding_clearance) if slow else full
+        return np.array([held if tick.holds(p) else full for p in peers])
 
     def _band(self) -> tuple[np.ndarray, np.ndarray]:
         """The lowest and highest command [rad/s] each joint reaches from the last in a tick."""

@@ -39,17 +39,9 @@ from nehmo_core.planning.opt.pipeline import Host
 from nehmo_core.planning.opt.problem import project_step
 from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.planning.stages.exact_guard import WorldFilter
+from nehmo_core.planning.stages.exact_guard import WorldFilter, distances
 
 __all__ = ["ContactGuard", "contact_step"]
-
-
-def _distances(
-    world: CellWorld, arm_id: str, x: np.ndarray, peers: list[str], cutoff: float
-) -> np.ndarray:
-    """Arm ``arm_id`` posed at ``x``: its distance [m] to each of ``peers`` (already posed)."""
-    world.set_joint_positions(arm_id, x)
-    return np.array([world.distance(arm_id, p, cutoff) for p in peers])
 
 
 def _fits(
@@ -65,7 +57,7 @@ def _fits(
     of ``peers`` at least its floor away (0 if none)."""
     cutoff = float(floors.max()) + 0.05
     for scale in scales:
-        ends = [_distances(world, arm_id, q + f * scale * step, peers, cutoff) for f in (1.0, 0.5)]
+        ends = [distances(world, arm_id, q + f * scale * step, peers, cutoff) for f in (1.0, 0.5)]
         if all(bool((d >= floors).all()) for d in ends):
             return scale
     return 0.0
@@ -80,8 +72,8 @@ def _gradient(
     for j in range(len(q)):
         dq = np.zeros(len(q))
         dq[j] = probe
-        hi = _distances(world, arm_id, q + dq, [peer], cutoff)[0]
-        lo = _distances(world, arm_id, q - dq, [peer], cutoff)[0]
+        hi = distances(world, arm_id, q + dq, [peer], cutoff)[0]
+        lo = distances(world, arm_id, q - dq, [peer], cutoff)[0]
         grad[j] = (hi - lo) / (2 * probe)
     return grad
 
@@ -104,7 +96,7 @@ def contact_step(
     # ``holding_clearance``
     clearance = np.array([_clearance(s, tick, p) for p in near])
     watch = clearance + s.contact.approach
-    now = _distances(world, arm_id, q, list(near), float(watch.max()) + 0.01)
+    now = distances(world, arm_id, q, list(near), float(watch.max()) + 0.01)
     inside = now < watch
     if not inside.any():
         return u, False

@@ -31,7 +31,15 @@ from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.robots.model import Cell
 
-__all__ = ["ExactGuard", "WorldFilter", "cell_world", "closer_than", "closest", "guard_step"]
+__all__ = [
+    "ExactGuard",
+    "WorldFilter",
+    "cell_world",
+    "closer_than",
+    "closest",
+    "distances",
+    "guard_step",
+]
 
 
 def cell_world(cell: Cell, owner: object) -> Lease:
@@ -45,6 +53,14 @@ def closest(
     """Arm ``arm_id`` posed at ``x``: its smallest distance [m] to ``peers`` (already posed)."""
     world.set_joint_positions(arm_id, x)
     return min(world.distance(arm_id, p, cutoff) for p in peers)
+
+
+def distances(
+    world: CellWorld, arm_id: str, x: np.ndarray, peers: Iterable[str], cutoff: float
+) -> np.ndarray:
+    """Arm ``arm_id`` posed at ``x``: its distance [m] to each of ``peers`` (already posed)."""
+    world.set_joint_positions(arm_id, x)
+    return np.array([world.distance(arm_id, p, cutoff) for p in peers])
 
 
 def guard_step(
