@@ -93,7 +93,7 @@ def test_an_arm_pushed_off_its_goal_keeps_its_bound_until_hold_release(models: l
         seen.append(result.telemetry.speed_bound)
         if result.telemetry.speed_bound < 1.0:
             assert np.abs(result.velocity).max() <= 0.2 * 0.5 + 1e-12
-    # kept beyond the tolerance (0.15 rad) up to the release, withdrawn beyond 0.3 rad, and
+    # kept beyond the tolerance (0.09 rad) up to the release, withdrawn beyond 0.3 rad, and
     # made anew only back within the tolerance
     assert seen == [0.2, 0.2, 0.2, 1.0, 1.0, 0.2]
 

@@ -6,7 +6,8 @@ nothing). It
 changes the share of ū this arm's commands keep and what it announces; the V rows against every
 peer's worst case stay (why a kept bound is safe: :mod:`nehmo_core.planning.opt.peer_bounds`).
 
-A NeHMO arm within ``hold_tolerance`` of its goal announces ``k = hold_bound`` with every command
+A NeHMO arm within ``hold_tolerance`` of its goal (``hold.pressed_tolerance`` while a peer's V row
+reads within ``hold.pressed_band`` of its margin) announces ``k = hold_bound`` with every command
 and keeps its own commands within ``k·ū`` from then on, including its fail-safe. A withdrawal (a
 new goal, drifting beyond ``hold_release``, or a threat) is announced ``bound_release_ticks``
 commands before the arm moves faster, so peers hear it before it matters. The threat: a NeHMO
@@ -84,10 +85,13 @@ class HoldAnnouncer:
         until a peer breaks the slow game (:meth:`threatened`), else full speed."""
         s = self.settings
         e = float(np.linalg.norm(tick.error0))
-        live = self.holding or e <= s.hold.tolerance  # else the threat test cannot matter
+        arrived = e <= s.hold.tolerance or (
+            not self.holding and e <= s.hold.pressed_tolerance and self.pressed(tick)
+        )
+        live = self.holding or arrived  # else the threat test cannot matter
         if e > s.hold.release or (live and self.threatened(tick)):
             self.holding = False
-        elif e <= s.hold.tolerance:
+        elif arrived:
             self.holding = True
         tick.announced = s.hold.bound if self.holding else FULL_SPEED
         if s.hold.self_check:
@@ -107,6 +111,19 @@ class HoldAnnouncer:
             bound = FULL_SPEED
         self._own.announce(me, bound)
         return bound
+
+    def pressed(self, tick: Tick) -> bool:
+        """Whether some peer's V row (at the bound it announced) reads within
+        ``hold.pressed_band`` of its margin: the arm may be held short of its goal by it."""
+        host = self.host
+        ids = [p for p in host.pairs if p in tick.bounds]
+        if not ids:
+            return False
+        now = host.evaluate(tick.q, tick.peers, ids, tick.bounds)
+        margins = [
+            host.group_margin(m, b) for m, b in zip(now.model_index, now.bounds, strict=True)
+        ]
+        return bool(np.any(now.values - np.array(margins) < self.settings.hold.pressed_band))
 
     def threatened(self, tick: Tick) -> bool:
         """Whether a peer at full speed has broken the slow game with this arm near its goal:
