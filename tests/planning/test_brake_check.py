@@ -229,10 +229,15 @@ def test_a_peer_closing_on_a_holder_brakes_in_time_under_realistic_tracking(
     """Closed loop under the ``realistic`` actuator model (its noise is seeded by the start):
     the ``real_actuators`` preset without the braking check (and without the contact guard's
     approach band, which also parts these arms) touches; with it, no contact."""
-    # found with the hold announced within 0.05 rad of the goal and the paper's fail-safe
-    # sweeping every joint (the defaults then); at today's 0.09, or with the deadband, these
-    # arms meet otherwise
-    overrides = {"opt.deadline": 3600.0, "hold.tolerance": 0.05, "fail_safe.deadband": 0.0}
+    # found with the hold announced within 0.05 rad of the goal (also when a peer presses) and
+    # the paper's fail-safe sweeping every joint (the defaults then); at today's 0.09, or with
+    # the deadband, these arms meet otherwise
+    overrides = {
+        "opt.deadline": 3600.0,
+        "hold.tolerance": 0.05,
+        "hold.pressed_tolerance": 0.05,
+        "fail_safe.deadband": 0.0,
+    }
     if brake is not None:
         overrides["actuator.brake_clearance"] = brake
         overrides["contact.approach"] = 0.0
