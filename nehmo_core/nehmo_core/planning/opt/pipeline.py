@@ -46,6 +46,7 @@ __all__ = [
     "PeerRowProvider",
     "RowProvider",
     "Stage",
+    "margin_gaps",
     "peer_vectors",
     "read_tick",
 ]
@@ -162,6 +163,13 @@ class Fallback(Stage, Protocol):
     def command(self, now: PeerValues, u_max: float) -> np.ndarray:
         """The fail-safe command [rad/s] within ``u_max``."""
         ...
+
+
+def margin_gaps(host: Host, now: PeerValues) -> np.ndarray:
+    """``V_i − margin_i`` [m] of each peer in ``now``: its V at this tick less the margin its
+    rows keep against a peer at the bound it announced (negative: the row is broken now)."""
+    margins = [host.group_margin(m, b) for m, b in zip(now.model_index, now.bounds, strict=True)]
+    return now.values - np.array(margins)
 
 
 def read_tick(

@@ -49,7 +49,7 @@ import numpy as np
 
 from nehmo_core.errors import InvalidValueError
 from nehmo_core.planning.opt.peer_bounds import FULL_SPEED
-from nehmo_core.planning.opt.pipeline import Host
+from nehmo_core.planning.opt.pipeline import Host, margin_gaps
 from nehmo_core.planning.opt.problem import LinearRows
 from nehmo_core.planning.opt.tick import PeerValues, Tick
 from nehmo_core.planning.stages.exact_guard import WorldFilter, distances
@@ -95,10 +95,7 @@ class AccelLimits(WorldFilter):
         if not now.ids:
             return None
         grads = np.array([g[: self.dof] for g in now.grads])
-        margins = np.array(
-            [self.host.group_margin(m, b) for m, b in zip(now.model_index, now.bounds, strict=True)]
-        )
-        gaps = np.maximum(now.values - margins, 0.0)
+        gaps = np.maximum(margin_gaps(self.host, now), 0.0)
         return LinearRows(grads, -self.rate * self.t_plan * gaps)
 
     def filter(self, tick: Tick, now: PeerValues, u: np.ndarray) -> np.ndarray:

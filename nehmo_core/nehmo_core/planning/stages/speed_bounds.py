@@ -36,7 +36,7 @@ from collections import deque
 import numpy as np
 
 from nehmo_core.planning.opt.peer_bounds import FULL_SPEED, PeerBounds
-from nehmo_core.planning.opt.pipeline import Host
+from nehmo_core.planning.opt.pipeline import Host, margin_gaps
 from nehmo_core.planning.opt.tick import Tick
 from nehmo_core.planning.stages.exact_guard import cell_world, closer_than
 
@@ -120,10 +120,7 @@ class HoldAnnouncer:
         if not ids:
             return False
         now = host.evaluate(tick.q, tick.peers, ids, tick.bounds)
-        margins = [
-            host.group_margin(m, b) for m, b in zip(now.model_index, now.bounds, strict=True)
-        ]
-        return bool(np.any(now.values - np.array(margins) < self.settings.hold.pressed_band))
+        return bool(np.any(margin_gaps(host, now) < self.settings.hold.pressed_band))
 
     def threatened(self, tick: Tick) -> bool:
         """Whether a peer at full speed has broken the slow game with this arm near its goal:
