@@ -125,6 +125,20 @@ SETUPS: dict[str, Setup] = {
             goal_separation=GOAL_SEPARATION,
         ),
         Setup(
+            "dual_kinova",
+            "dual_kinova",
+            20.0,
+            description="two Kinova Gen3 (6-DoF) 0.6 m apart, facing",
+            goal_separation=GOAL_SEPARATION,
+        ),
+        Setup(
+            "mixed_three",
+            "mixed_three",
+            30.0,
+            description="a UR5, a Kinova Gen3 and a Panda at irregular poses (0.79-0.83 m apart)",
+            goal_separation=GOAL_SEPARATION,
+        ),
+        Setup(
             "mixed_four",
             "mixed_four",
             30.0,
