@@ -80,6 +80,8 @@ def test_bad_spacing_is_rejected_by_name() -> None:
         collision_points(load_robot("panda"), spacing=0.0)
     with pytest.raises(InvalidValueError, match="keypoints"):
         DistanceTrainSettings(keypoints="spheres")
+    with pytest.raises(InvalidValueError, match="grad_clip"):
+        DistanceTrainSettings(grad_clip=0.0)
 
 
 def test_a_model_with_its_own_points_round_trips_through_its_card(
