@@ -52,14 +52,17 @@ def _conditioned_ranges() -> dict[tuple[str, str], list[tuple[float, float]]]:
     return out
 
 
-KNOWN_GAPS = {("ur5", "kinova_gen3_6dof"): 1.7}
+KNOWN_GAPS = {("ur5", "kinova_gen3_6dof"): 1.7, ("kinova_gen3_6dof", "panda"): MIN_BASE_DISTANCE}
 """Robot pairs whose conditioned models stop short of their reach: where they stop [m] (README,
-Limitations); the planner reports such a peer as unmodelled and does not plan beside it."""
+Limitations; at ``MIN_BASE_DISTANCE``: no model at all); the planner reports such a peer as
+unmodelled and does not plan beside it."""
 
 
 def test_every_pair_that_can_touch_is_covered_by_a_model() -> None:
     ranges = _conditioned_ranges()
-    assert {("ur5", "ur5"), ("ur5", "panda"), ("panda", "panda")} <= set(ranges)
+    every = set(itertools.combinations_with_replacement(SHIPPED_ROBOTS, 2))
+    for pair in every - set(ranges) - {p[::-1] for p in ranges}:
+        ranges[pair] = []  # no model: covered from MIN_BASE_DISTANCE to MIN_BASE_DISTANCE
     for (a, b), found in ranges.items():
         reach = base_range(arm_reach(load_robot(a)), arm_reach(load_robot(b)))[1]
         covered = MIN_BASE_DISTANCE
@@ -69,8 +72,9 @@ def test_every_pair_that_can_touch_is_covered_by_a_model() -> None:
         said = (
             f"{a}-{b}: models cover {MIN_BASE_DISTANCE}-{covered} m; the arms touch up to {reach}"
         )
-        if (a, b) in KNOWN_GAPS:
-            assert covered == pytest.approx(KNOWN_GAPS[a, b]) and covered < reach, said
+        gap = KNOWN_GAPS.get((a, b), KNOWN_GAPS.get((b, a)))
+        if gap is not None:
+            assert covered == pytest.approx(gap) and covered < reach, said
         else:
             assert covered >= reach - 1e-9, said
 

@@ -1,5 +1,6 @@
-"""The Panda (7 joints, every joint limited) through the planner with the pair models that
-``nehmo pair build`` made: dual-Panda and UR5-Panda episodes in closed loop stay apart."""
+"""The Panda (7 joints, every joint limited) and the Kinova through the planner with the pair
+models that ``nehmo pair build`` made: dual-Panda, UR5-Panda and dual-Kinova episodes in closed
+loop stay apart."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import torch
 
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
 from nehmo_core.eval.planners import build_planners
+from nehmo_core.eval.setups import get_setup
 from nehmo_core.hjr import load_value_function
 from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.models.value_model import PairValueModel
@@ -19,14 +21,21 @@ from nehmo_core.sim.scenarios import generate_scenario_set
 SEED = 7  # scenarios of this test only (evaluation seeds: docs/adding-a-robot.md)
 
 
+CELL_PAIRS = {
+    "dual_panda": {"panda_panda_any"},
+    "ur5_panda": {"ur5_panda_any", "panda_ur5_any"},
+    "dual_kinova": {"kinova_gen3_6dof_kinova_gen3_6dof_any"},
+}
+"""Cells of built pairs and the pairs each needs."""
+
+
 def _cells() -> list[str]:
     have = set(registry.PAIR_NAMES)
-    cells = []
-    if "panda_panda_any" in have:
-        cells.append("dual_panda")
-    if {"ur5_panda_any", "panda_ur5_any"} <= have:
-        cells.append("ur5_panda")
-    return cells
+    return [cell for cell, pairs in CELL_PAIRS.items() if pairs <= have]
+
+
+def test_the_pairs_of_every_such_cell_ship() -> None:
+    assert _cells() == list(CELL_PAIRS)
 
 
 def test_the_panda_pairs_ship() -> None:
@@ -83,16 +92,18 @@ def test_the_built_value_function_is_capped_at_its_boundary() -> None:
 @pytest.mark.parametrize("cell_name", _cells())
 def test_episodes_in_closed_loop_stay_apart_and_mostly_arrive(cell_name: str) -> None:
     cell = load_cell(cell_name)
-    assert max(a.robot.dof for a in cell.arms) == 7
+    has_panda = any(a.robot.name == "panda" for a in cell.arms)
+    assert max(a.robot.dof for a in cell.arms) == (7 if has_panda else 6)
     scenarios = generate_scenario_set(cell, seed=SEED, count=3).scenarios
     unhurried = PlannerSettings().override({"opt.deadline": 3600.0})
+    episode = EpisodeSettings(time_limit=get_setup(cell_name).time_limit)
     registry_ = ModelRegistry()
     reached = 0
     for scenario in scenarios:
         planners = build_planners(
             cell, {a: "nehmo" for a in cell.arm_ids}, scenario, 0.04, registry_, unhurried
         )
-        result = run_episode(cell, scenario, planners, EpisodeSettings(time_limit=20.0))
+        result = run_episode(cell, scenario, planners, episode)
         assert not [c for c in result.collisions if c.arm_a != c.arm_b]
         assert all(np.isfinite(e) for e in result.final_errors.values())
         reached += result.outcome == "success"
