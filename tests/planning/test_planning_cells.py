@@ -252,20 +252,20 @@ def test_nehmo_on_both_arms_of_the_ur5_kinova_cell() -> None:
 
 
 def test_missing_pair_models_are_named() -> None:
-    two_kinovas = cell_from_dict(
+    kinova_panda = cell_from_dict(
         {
-            "name": "two_kinovas",
+            "name": "kinova_panda",
             "arms": [
                 {"id": "k0", "robot": "kinova_gen3_6dof"},
-                {"id": "k1", "robot": "kinova_gen3_6dof", "base": {"xyz": [0.6, 0, 0]}},
+                {"id": "p1", "robot": "panda", "base": {"xyz": [0.6, 0, 0]}},
             ],
         }
     )
-    scenario = sample_scenario(two_kinovas, scenario_rng(0, 0))
+    scenario = sample_scenario(kinova_panda, scenario_rng(0, 0))
     assert ("kinova_gen3_6dof", "ur5") in SHIPPED_PAIRS
-    kinds = {"k0": "nehmo", "k1": "naive"}
-    with pytest.raises(NehmoError, match=r"'k0'.*\('kinova_gen3_6dof', 'kinova_gen3_6dof'\)") as e:
-        build_planners(two_kinovas, kinds, scenario, 0.04, ModelRegistry())
+    kinds = {"k0": "nehmo", "p1": "naive"}
+    with pytest.raises(NehmoError, match=r"'k0'.*\('kinova_gen3_6dof', 'panda'\)") as e:
+        build_planners(kinova_panda, kinds, scenario, 0.04, ModelRegistry())
     assert "kinova_ur5" in str(e.value) and "ur5_kinova" in str(e.value)
 
 
