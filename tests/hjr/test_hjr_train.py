@@ -223,6 +223,31 @@ def test_squared_dirichlet_term(pretraining: bool) -> None:
     torch.testing.assert_close(b["loss"], 40.0 * (on * on).mean() + b["pde"])
 
 
+@pytest.mark.parametrize("variant", ["bc", "deepreach"])
+def test_squared_pde_term(variant: str) -> None:
+    """``pde_loss="l2"`` puts the mean squared PDE residual into the loss; the logged ``pde``
+    stays the mean absolute residual; pretraining (no PDE term) is unchanged."""
+    system, net, tau, x, mask = _net_and_batch(variant, 7, 8)
+    l1 = TrainSettings(variant=variant, dirichlet_weight=40.0)
+    l2 = replace(l1, pde_loss="l2")
+    a = loss_terms(net, l1, tau, x, mask, pretraining=False)
+    b = loss_terms(net, l2, tau, x, mask, pretraining=False)
+    t = tau.clone().requires_grad_(True)
+    xx = x.clone().requires_grad_(True)
+    w, _ = net.forward_with_residual(t, xx)
+    dw_dtau, dw_dx = torch.autograd.grad(w.sum(), [t, xx])
+    r = dw_dtau - system.hamiltonian(xx, dw_dx).clamp(max=0.0)
+    torch.testing.assert_close(b["pde"], a["pde"])
+    torch.testing.assert_close(a["pde"], r.abs().mean(), rtol=1e-5, atol=1e-6)
+    dirichlet_part = a["loss"] - a["pde"]
+    torch.testing.assert_close(b["loss"], dirichlet_part + (r * r).mean(), rtol=1e-5, atol=1e-6)
+    pre = loss_terms(net, l2, tau, x, mask, pretraining=True)
+    torch.testing.assert_close(pre["loss"], loss_terms(net, l1, tau, x, mask, True)["loss"])
+    with pytest.raises(UnknownNameError, match="PDE loss"):
+        TrainSettings(pde_loss="huber")
+    assert TrainSettings().pde_loss == "l1"  # DeepReach's, and every shipped model's
+
+
 @pytest.mark.parametrize("variant", ["bc", "exact", "deepreach"])
 def test_the_gradient_term_adds_the_residual_networks_mean_l1_slope(variant: str) -> None:
     """``gradient_weight`` adds ``weight·mean max(0, ‖∇ₓNN‖₁ − ‖∇ₓl̂‖₁)`` of the residual
@@ -283,6 +308,7 @@ def test_cli_resume_without_a_checkpoint_is_an_error(
         ("--samples", "1.5", "`--samples` must be a positive whole count"),
         ("--gradient-weight", "-1", "`--gradient-weight` must be >= 0"),
         ("--omega0", "0", "`--omega0` must be > 0"),
+        ("--pde-loss", "huber", "unknown PDE loss 'huber'. Valid PDE loss names: ['l1', 'l2']"),
     ],
 )
 def test_cli_errors_name_the_option_typed(

@@ -17,6 +17,7 @@ import yaml
 from nehmo_core.cli import main
 from nehmo_core.errors import InvalidValueError, ModelFileError
 from nehmo_core.pairs.build import PairBuild
+from nehmo_core.pairs.check import judge_mirror
 from nehmo_core.robots import descriptions, registry
 from nehmo_core.robots.loader import load_robot
 
@@ -83,11 +84,14 @@ def test_the_pipeline_writes_models_manifest_and_a_card_of_every_stage(built) ->
     # capsules in a plane are mirror-symmetric: the mirror map holds, so bc+sym is trained
     assert check["mirror_check"]["mean_abs_diff_near_m"] < 1e-6
     assert check["variant"] == "bc+sym"
+    # the build's own command as typed (no --base-range: every distance that can touch)
+    assert card["command"].startswith(f"nehmo pair build {ARM} {ARM} --budget tiny --seed 0 ")
+    assert "--base-range" not in card["command"]
     # every command ran is recorded as typed
     commands = [c for s in stages.values() for c in s["commands"]]
     assert any(c.startswith(f"nehmo distance generate --pair {PAIR}") for c in commands)
     trained = [c for c in commands if c.startswith(f"nehmo train --system {PAIR} --variant bc+sym")]
-    assert len(trained) == 1 and "--gradient-weight 1" in trained[0]
+    assert all("--gradient-weight 1" in c for c in trained)
     assert any(c.startswith(f"nehmo verify --model {PAIR}") for c in commands)
     # the value stage measures the network against its PDE; a tiny budget's network is told
     # apart from a learned value, and the card says so in its warnings
@@ -95,6 +99,19 @@ def test_the_pipeline_writes_models_manifest_and_a_card_of_every_stage(built) ->
     assert {"residual_ratio", "slope_ratio", "model_fall_share"} <= set(check["pde"])
     unlearned = [w for w in card["warnings"] if w.startswith(f"value function {PAIR} learned")]
     assert len(unlearned) == (0 if check["learned"] else 1)
+    # a first network that learned nothing is trained once more with the squared PDE residual;
+    # the stage keeps the attempt that learned, else the one closer to the PDE
+    value = stages[f"value:{PAIR}"]["figures"]
+    attempts = value["attempts"]
+    assert [a["pde_loss"] for a in attempts] == ["l1", "l2"][: len(attempts)]
+    assert len(trained) == len(attempts) and "--pde-loss" not in trained[0]
+    assert all(not a["learned"] for a in attempts[:-1])
+    if len(attempts) == 2:
+        assert "--pde-loss l2" in trained[1]
+    ratios = {a["pde_loss"]: a["residual_ratio"] for a in attempts}
+    learned = [a["pde_loss"] for a in attempts if a["learned"]]
+    assert value["pde_loss"] == (learned[0] if learned else min(ratios, key=ratios.__getitem__))
+    assert check["pde"]["residual_ratio"] == pytest.approx(ratios[value["pde_loss"]])
     falsified = stages[f"falsify:{PAIR}"]["figures"]
     assert falsified["states"] == 40 and 0 <= falsified["contacts"] <= 40
     # the planner ran with the fresh models on the three visit cells, one episode each, at base
@@ -113,6 +130,9 @@ def test_the_pipeline_writes_models_manifest_and_a_card_of_every_stage(built) ->
         (0.3, "visited"),
     ]
     assert value_card["pair_card"] == f"{PAIR}.card.json"
+    # the model folder holds the attempt the stage kept
+    kept = stages[f"value:{PAIR}"]["figures"]["pde_loss"]
+    assert ("--pde-loss l2" in value_card["training"]) == (kept == "l2")
 
 
 def test_a_fresh_process_finds_the_pair_through_the_model_folder(built) -> None:
@@ -200,3 +220,19 @@ def test_a_malformed_manifest_names_the_file_and_the_field(tmp_path: Path) -> No
     path.write_text("pairs:\n  - {name: a_b_any, robots: [ur5, ur5], colour: red}\n")
     with pytest.raises(InvalidValueError, match="keys among"):
         registry.read_pair_manifest(path)
+
+
+def test_the_mirror_check_of_far_bases_compares_the_states_closest_to_contact() -> None:
+    """At 1.6-2.0 m two UR5s are rarely within 0.3 m of each other: the check then compares the
+    states closest to contact, so bc+sym is never chosen on no evidence."""
+    from nehmo_core.pairs.probes import MIN_COMPARED, mirror_check
+
+    result = mirror_check("ur5_ur5_far", 600, seed=0)
+    assert result["near_contact_states"] < MIN_COMPARED
+    # measured states only: those at the labels' cutoff (1 m) would compare equal for free
+    assert 0 < result["compared_states"] <= MIN_COMPARED
+    assert 0.3 < result["compared_within_m"] < 1.0
+    assert f"over {result['compared_states']} states within" in judge_mirror(result)["why"]
+    # no state to compare: no evidence for the mirror map, so no bc+sym
+    none = {**result, "compared_states": 0, "mean_abs_diff_near_m": 0.0}
+    assert judge_mirror(none)["variant"] == "bc"

@@ -52,7 +52,7 @@ def _conditioned_ranges() -> dict[tuple[str, str], list[tuple[float, float]]]:
     return out
 
 
-KNOWN_GAPS = {("ur5", "kinova_gen3_6dof"): 1.7, ("kinova_gen3_6dof", "panda"): MIN_BASE_DISTANCE}
+KNOWN_GAPS: dict[tuple[str, str], float] = {}
 """Robot pairs whose conditioned models stop short of their reach: where they stop [m] (README,
 Limitations; at ``MIN_BASE_DISTANCE``: no model at all); the planner reports such a peer as
 unmodelled and does not plan beside it."""

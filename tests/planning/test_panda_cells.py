@@ -1,6 +1,7 @@
 """The Panda (7 joints, every joint limited) and the Kinova through the planner with the pair
-models that ``nehmo pair build`` made: dual-Panda, UR5-Panda and dual-Kinova episodes in closed
-loop stay apart."""
+models that ``nehmo pair build`` made: every cell of built pairs (two Pandas, a UR5 and a Panda,
+two Kinovas, a UR5, a Kinova and a Panda, a UR5 and a Kinova 1.8 m apart) stays apart in closed
+loop."""
 
 from __future__ import annotations
 
@@ -25,6 +26,8 @@ CELL_PAIRS = {
     "dual_panda": {"panda_panda_any"},
     "ur5_panda": {"ur5_panda_any", "panda_ur5_any"},
     "dual_kinova": {"kinova_gen3_6dof_kinova_gen3_6dof_any"},
+    "mixed_three": {"kinova_gen3_6dof_panda_any", "panda_kinova_gen3_6dof_any"},
+    "triangle_ur5_kinova": {"ur5_kinova_gen3_6dof_far", "kinova_gen3_6dof_ur5_far"},
 }
 """Cells of built pairs and the pairs each needs."""
 

@@ -252,12 +252,14 @@ def test_nehmo_on_both_arms_of_the_ur5_kinova_cell() -> None:
 
 
 def test_missing_pair_models_are_named() -> None:
+    # every pair of shipped robots is modelled at equal mounting heights: a Panda mounted 0.3 m
+    # above a Kinova is not
     kinova_panda = cell_from_dict(
         {
             "name": "kinova_panda",
             "arms": [
                 {"id": "k0", "robot": "kinova_gen3_6dof"},
-                {"id": "p1", "robot": "panda", "base": {"xyz": [0.6, 0, 0]}},
+                {"id": "p1", "robot": "panda", "base": {"xyz": [0.6, 0, 0.3]}},
             ],
         }
     )
@@ -266,6 +268,8 @@ def test_missing_pair_models_are_named() -> None:
     kinds = {"k0": "nehmo", "p1": "naive"}
     with pytest.raises(NehmoError, match=r"'k0'.*\('kinova_gen3_6dof', 'panda'\)") as e:
         build_planners(kinova_panda, kinds, scenario, 0.04, ModelRegistry())
+    assert "p1 (panda) 0.60 m away, +0.30 m up" in str(e.value)
+    assert "equal mounting height" in str(e.value)
     assert "kinova_ur5" in str(e.value) and "ur5_kinova" in str(e.value)
 
 

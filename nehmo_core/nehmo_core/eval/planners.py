@@ -7,6 +7,7 @@ such a peer would not be constrained at all.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 
 from nehmo_core.errors import NehmoError
@@ -46,9 +47,15 @@ def _missing_models(
         for name in names
         if name in SHIPPED_VALUE_FUNCTIONS  # not an optional model that is not trained yet
     ]
+    base = cell.arm(arm_id).base.xyz
+    where = []
+    for p in peers:
+        x, y, z = (b - a for a, b in zip(base, cell.arm(p).base.xyz, strict=True))
+        where.append(f"{p} ({cell.arm(p).robot.name}) {math.hypot(x, y):.2f} m away, {z:+.2f} m up")
     return NehmoError(
-        f"arm {arm_id!r} ({kind}) has peers {list(peers)} that no value model covers; "
-        f"it needs pair models {need} (robot1 = the planning arm). Sources used: "
+        f"arm {arm_id!r} ({kind}) has peers {list(peers)} that no value model covers "
+        f"({'; '.join(where)}); it needs pair models {need} (robot1 = the planning arm) whose "
+        "base range holds that distance at an equal mounting height. Sources used: "
         f"{registry.sources_for(kind, cell)}; models loaded: {loaded or 'none'}; shipped pair "
         f"models: {', '.join(shipped)}"
     )

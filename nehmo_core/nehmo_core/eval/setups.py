@@ -132,6 +132,20 @@ SETUPS: dict[str, Setup] = {
             goal_separation=GOAL_SEPARATION,
         ),
         Setup(
+            "mixed_three",
+            "mixed_three",
+            30.0,
+            description="a UR5, a Kinova Gen3 and a Panda at irregular poses (0.79-0.83 m apart)",
+            goal_separation=GOAL_SEPARATION,
+        ),
+        Setup(
+            "triangle_ur5_kinova",
+            "triangle_ur5_kinova",
+            20.0,
+            description="two UR5s and a Kinova in a triangle (1.8, 1.17, 1.24 m apart)",
+            goal_separation=GOAL_SEPARATION,
+        ),
+        Setup(
             "mixed_four",
             "mixed_four",
             30.0,

@@ -140,5 +140,6 @@ def unlearned_warning(game: str, pde: dict[str, Any]) -> str:
         f"{'-' if fall is None else f'{fall:.2f}'} of states against "
         f"{pde['must_fall_share']:.2f} for V = l, mean l - V(T) "
         f"{pde['mean_fall_at_horizon']:.4f} m): its certificates hold, but its V is close to a "
-        "distance; train longer or with a larger --gradient-weight (docs/value-functions.md)"
+        "distance; train longer, with a larger --gradient-weight or with --pde-loss l2 "
+        "(docs/value-functions.md)"
     )

@@ -6,7 +6,8 @@ Schedule (a budget of ``samples`` states, pretraining included, in steps of ``ba
 2. The rest with a linear time curriculum ``τ ~ U[0, T·min(1, k/K)]``, ``K`` being
    ``curriculum_fraction`` of the remaining steps; the last ``boundary_fraction`` of every batch
    is forced to ``τ = 0``. Loss ``dirichlet_weight·mean|W − l̂|`` over the ``τ = 0`` points plus
-   ``pde_weight·mean|∂W/∂τ − min(0, H(x, ∇ₓW))|`` over all points.
+   ``pde_weight·mean|∂W/∂τ − min(0, H(x, ∇ₓW))|`` over all points (each term squared instead
+   with ``dirichlet_loss`` / ``pde_loss`` ``"l2"``).
 
 Adam with a learning rate that is a pure function of the step (``lr_schedule``): ``constant``;
 ``cosine`` from ``learning_rate`` down to ``lr_final_fraction·learning_rate`` over all steps;
@@ -156,13 +157,15 @@ def loss_terms(
         # the residual's slope beyond the boundary's (ripples; a value's own slope costs nothing)
         slope = torch.relu(dn_dx.abs().sum(dim=1) - dl_dx.abs().sum(dim=1)).mean()
     hamiltonian = network.system.hamiltonian(x, dw_dx)
-    pde = (dw_dtau - hamiltonian.clamp(max=0.0)).abs().mean()
+    pde_residual = dw_dtau - hamiltonian.clamp(max=0.0)
+    pde = pde_residual.abs().mean()
     if bool(boundary_mask.any()):
         on_boundary = residual[boundary_mask]
         dirichlet, penalty = on_boundary.abs().mean(), _dirichlet_penalty(settings, on_boundary)
     else:
         dirichlet = penalty = zero
-    loss = settings.dirichlet_weight * penalty + settings.pde_weight * pde
+    pde_penalty = (pde_residual * pde_residual).mean() if settings.pde_loss == "l2" else pde
+    loss = settings.dirichlet_weight * penalty + settings.pde_weight * pde_penalty
     if settings.gradient_weight > 0:
         loss = loss + settings.gradient_weight * slope
     return {"loss": loss, "dirichlet": dirichlet, "pde": pde}

@@ -56,6 +56,9 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--lr-schedule", help=f"one of {list(LR_SCHEDULES)}")
     parser.add_argument("--lr-final", type=float, help="last rate as a share of --lr")
     parser.add_argument("--dirichlet-loss", help=f"one of {list(DIRICHLET_LOSSES)}")
+    parser.add_argument(
+        "--pde-loss", help=f"one of {list(DIRICHLET_LOSSES)}: |r| or r² of the PDE residual"
+    )
     parser.add_argument("--omega0", type=float, help="SIREN first-layer frequency")
     parser.add_argument(
         "--gradient-weight",
@@ -85,6 +88,7 @@ _OPTIONS = {
     "lr_schedule": "--lr-schedule",
     "lr_final_fraction": "--lr-final",
     "dirichlet_loss": "--dirichlet-loss",
+    "pde_loss": "--pde-loss",
     "gradient_weight": "--gradient-weight",
     "omega0": "--omega0",
     "checkpoint_every": "--checkpoint-every",
@@ -124,6 +128,8 @@ def _settings_from_args(args: argparse.Namespace) -> TrainSettings:
         overrides["lr_final_fraction"] = args.lr_final
     if args.dirichlet_loss is not None:
         overrides["dirichlet_loss"] = args.dirichlet_loss
+    if args.pde_loss is not None:
+        overrides["pde_loss"] = args.pde_loss
     if args.gradient_weight is not None:
         overrides["gradient_weight"] = args.gradient_weight
     if args.checkpoint_every is not None:

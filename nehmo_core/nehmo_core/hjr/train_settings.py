@@ -37,6 +37,13 @@ class TrainSettings:
     zero pins the residual network there, at any weight we tried. The square's slope vanishes
     at zero, so small boundary errors cost little and the PDE term can shape the network.
 
+    ``pde_loss``: ``"l1"`` is DeepReach's ``mean |∂W/∂τ − min(0, H)|``; ``"l2"`` its square.
+    Where fewer than half of the states must fall (``H(x, ∇l) < 0``), the absolute value pulls
+    every state's slope in ``τ`` toward the median of the targets, 0, with the same force, and a
+    network that does not yet tell the falling states apart stays at ``NN ≡ 0`` (the Panda's game
+    against a Kinova: 41 % of states). The square's pull vanishes at 0 (``pairs.value_stage``
+    retries such a game with it).
+
     ``gradient_weight``: the L1 Hamiltonian ``ū‖∇_{q¹}W‖₁ − d̄‖∇_{q²}W‖₁`` rewards any gradient
     in the own joints, so a residual network can meet the PDE without learning the value: sine
     ripples of a few millimetres with steep own-joint slopes make ``H ≥ 0`` almost everywhere, and
@@ -60,6 +67,7 @@ class TrainSettings:
     dirichlet_weight: float = 40.0
     dirichlet_loss: str = "l1"  # one of DIRICHLET_LOSSES
     pde_weight: float = 1.0
+    pde_loss: str = "l1"  # one of DIRICHLET_LOSSES: mean |r| or mean r² of the PDE residual
     # weight of the mean excess of ‖∇ₓNN‖₁ over ‖∇ₓl̂‖₁ (bc variants): keeps the residual network
     # from meeting the PDE with ripples instead of a value (see the class docstring)
     gradient_weight: float = 0.0
@@ -82,6 +90,8 @@ class TrainSettings:
             )
         if self.dirichlet_loss not in DIRICHLET_LOSSES:
             raise UnknownNameError("Dirichlet loss", self.dirichlet_loss, DIRICHLET_LOSSES)
+        if self.pde_loss not in DIRICHLET_LOSSES:
+            raise UnknownNameError("PDE loss", self.pde_loss, DIRICHLET_LOSSES)
         if self.lr_schedule not in LR_SCHEDULES:
             raise UnknownNameError("learning-rate schedule", self.lr_schedule, LR_SCHEDULES)
         if not 0.0 < self.lr_final_fraction <= 1.0:

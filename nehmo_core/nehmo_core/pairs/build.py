@@ -13,7 +13,8 @@ folder that remembers what is done (run it again and it goes on where it stopped
 5. ``distance-certificate``: the learned distance on exact contact states (α, β).
 6. ``value:<game>``: the conditioned ``bc+sym`` value function of each side (one for a pair of
    the same robot; both games ``A_B_any`` and ``B_A_any`` otherwise), copied to the folder, and
-   measured against its PDE (a warning in the card if it learned little).
+   measured against its PDE; one that learned little is trained once more with the squared PDE
+   residual (:mod:`.value_stage`), and a warning in the card if neither learned.
 7. ``certify:<game>``: ``nehmo verify`` over uniform states at the planner's ``t_safe``.
 8. ``falsify:<game>``: states the planner would call safe (``V(t_safe) ≥ ε``) rolled out against
    every adversary on the exact geometry: the contact rate and its bound.
@@ -33,7 +34,6 @@ import json
 import os
 import platform
 import shlex
-import shutil
 import subprocess
 import sys
 import time
@@ -52,6 +52,7 @@ from nehmo_core.pairs.budgets import BUDGETS
 from nehmo_core.pairs.check import judge_mirror, pair_names, robot_figures, write_manifest
 from nehmo_core.pairs.probes import RESULT
 from nehmo_core.pairs.reach import checked_range
+from nehmo_core.pairs.value_stage import value_stage
 from nehmo_core.robots import registry
 from nehmo_core.robots.descriptions import robot_names
 from nehmo_core.robots.loader import atomic_write
@@ -232,7 +233,7 @@ class PairBuild:
             )
         return command
 
-    def _python(self, what: str, args: list[str]) -> Any:
+    def probe(self, what: str, args: list[str]) -> Any:
         """Run a probe (:mod:`.probes`) in a fresh process and return its JSON result."""
         proc = subprocess.run(
             [sys.executable, "-m", "nehmo_core.pairs.probes", *args],
@@ -266,9 +267,7 @@ class PairBuild:
         else:
             n, seed = str(self.budget.mirror_samples), str(self.seed)
             args = ["mirror", self.pair, "--samples", n, "--seed", seed]
-            figures["mirror_check"] = judge_mirror(
-                self._python(f"mirror check of {self.pair}", args)
-            )
+            figures["mirror_check"] = judge_mirror(self.probe(f"mirror check of {self.pair}", args))
         figures["variant"] = figures["mirror_check"]["variant"]
         write_manifest(self.models, self.robots, (low, high), figures["variant"], self.tag)
         return StageRecord([], figures)
@@ -351,7 +350,7 @@ class PairBuild:
             "--seed", str(self.seed + 3003), "--alpha", str(self.budget.alpha),
             "--pool", str(self.work / "data" / "test.npz"),
         ]  # fmt: skip
-        cert = self._python("distance certificate", args)
+        cert = self.probe("distance certificate", args)
         card_path = self.models / f"distance_{self.pair}.json"
         card = json.loads(card_path.read_text())
         card["certificates"] = [{**cert, "command": "nehmo pair build (distance-certificate)"}]
@@ -359,45 +358,7 @@ class PairBuild:
         return StageRecord([], cert)
 
     def _value(self, game: str) -> StageRecord:
-        run = self.work / f"value_{game}"
-        args = [
-            "train", "--system", game, "--variant", self.variant,
-            "--preset", self.budget.value_preset,
-            "--samples", self.budget.value_samples, "--seed", str(self.seed),
-            "--threads", str(self.threads), "--device", self.device, "--out", str(run),
-            "--gradient-weight", f"{self.budget.value_gradient_weight:g}",
-        ]  # fmt: skip
-        if (run / "checkpoint.safetensors").exists() and not (run / "model.safetensors").exists():
-            args.append("--resume")
-        done = (run / "model.safetensors").exists()  # trained before the stage was recorded
-        command = "nehmo " + shlex.join(args) if done else self.nehmo(f"value:{game}", args)
-        target = self.models / f"value_{game}_{self.slug}"
-        meta = json.loads((run / "model.json").read_text())
-        meta.setdefault("card", {}).update(
-            {
-                "what": f"neural HJR avoid value function of {game} (pose-conditioned)",
-                "training": command,
-                "boundary": f"l(x) = learned distance distance_{self.pair} (frozen)",
-                "hardware": f"{self.threads} CPU threads ({platform.machine()})",
-                "pair_card": f"{self.pair}.card.json",
-                "cap_residual": True,
-                "evaluation": "V = l + min(W - l, 0): an avoid value never exceeds its boundary",
-            }
-        )
-        shutil.copyfile(run / "model.safetensors", target.with_suffix(".safetensors"))
-        atomic_write(target.with_suffix(".json"), json.dumps(meta, indent=2, sort_keys=True) + "\n")
-        check = self._python(
-            f"value check of {game}",
-            ["value-check", game, "--variant", self.variant, "--samples", "4000", "--seed", "3"],
-        )
-        figures = {
-            "samples": meta.get("samples"),
-            "train_wall_time_s": meta.get("wall_seconds"),
-            "below_boundary": check,
-        }
-        if not check["learned"]:
-            tqdm.write(f"  warning: {unlearned_warning(game, check['pde'])}", file=sys.stderr)
-        return StageRecord([command], figures)
+        return StageRecord(*value_stage(self, game))
 
     def _certify(self, game: str, visited: bool = False) -> StageRecord:
         return StageRecord(*visit.certify_stage(self, game, visited))
@@ -408,7 +369,7 @@ class PairBuild:
             "--samples", str(self.budget.falsify_samples), "--seed", str(self.seed + 4004),
             *self.cluster_args,
         ]  # fmt: skip
-        result = self._python(f"falsification of {game}", args)
+        result = self.probe(f"falsification of {game}", args)
         return StageRecord([], result)
 
     def _card(self) -> StageRecord:
@@ -428,6 +389,9 @@ class PairBuild:
             "command": (
                 f"nehmo pair build {self.robots[0]} {self.robots[1]} --budget "
                 f"{self.budget_name} --seed {self.seed} --threads {self.threads}"
+                + ("" if self.base_range is None else " --base-range {:g} {:g} --tag {}").format(
+                    *(self.base_range or ()), self.tag
+                )
             ),
             "budget": {"name": self.budget_name, **asdict(self.budget)},
             "seed": self.seed,

@@ -52,12 +52,14 @@ def robot_figures(name: str, reach_samples: int, seed: int) -> dict[str, Any]:
 
 def judge_mirror(result: dict[str, Any]) -> dict[str, Any]:
     """The mirror check's result with the variant it decides and why."""
-    symmetric = result["mean_abs_diff_near_m"] <= MIRROR_TOLERANCE
+    compared = result.get("compared_states", result["near_contact_states"])
+    symmetric = compared > 0 and result["mean_abs_diff_near_m"] <= MIRROR_TOLERANCE
     return {
         **result,
         "variant": "bc+sym" if symmetric else "bc",
         "why": (
-            f"mean |d(x) - d(f(x))| within 0.3 m of contact "
+            f"mean |d(x) - d(f(x))| over {compared} states within "
+            f"{result.get('compared_within_m', 0.3):.2f} m of contact "
             f"{1000 * result['mean_abs_diff_near_m']:.1f} mm "
             f"{'<=' if symmetric else '>'} {1000 * MIRROR_TOLERANCE:.0f} mm: "
             + ("the mirror map holds; bc+sym" if symmetric else "no exact mirror map; bc")

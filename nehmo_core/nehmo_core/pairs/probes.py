@@ -19,6 +19,10 @@ __all__ = ["RESULT", "distance_certificate", "falsify", "mirror_check", "value_c
 RESULT = "NEHMO-RESULT "
 NEAR = 0.3
 """[m] States this close to contact enter the mirror check's mean."""
+MIN_COMPARED = 200
+"""Fewer states than this within :data:`NEAR` (bases far apart): the mirror check compares up to
+this many states closest to contact instead (below the labels' cutoff, where distances are
+measured), so it never passes on no evidence."""
 
 
 def mirror_check(pair: str, samples: int, seed: int) -> dict[str, Any]:
@@ -36,10 +40,16 @@ def mirror_check(pair: str, samples: int, seed: int) -> dict[str, Any]:
     d = dd.exact_distances(pair, np.c_[q, yaw])
     d_mirrored = dd.exact_distances(pair, np.c_[mirrored, -yaw])
     near = np.abs(d) < NEAR
+    if near.sum() < MIN_COMPARED:  # far bases: the states closest to contact instead
+        closest = np.argsort(np.abs(d))[: min(samples, MIN_COMPARED)]
+        near = np.zeros(samples, dtype=bool)
+        near[closest[np.maximum(d[closest], d_mirrored[closest]) < dd.CUTOFF]] = True
     diff = np.abs(d - d_mirrored)[near]
     return {
         "states": samples,
-        "near_contact_states": int(near.sum()),
+        "near_contact_states": int((np.abs(d) < NEAR).sum()),
+        "compared_states": int(near.sum()),
+        "compared_within_m": float(np.abs(d)[near].max()) if near.any() else 0.0,
         "mean_abs_diff_near_m": float(diff.mean()) if diff.size else 0.0,
         "max_abs_diff_near_m": float(diff.max()) if diff.size else 0.0,
         "seed": seed,
