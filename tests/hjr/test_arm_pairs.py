@@ -26,10 +26,10 @@ NEARLY_SYMMETRIC = {
     "kinova_gen3_6dof_ur5_far": (0.0095, 0.0003),
 }
 """(largest, mean) |l(x) − l(f(x))| [m] of built pairs, held to their own measured figures (at
-2000 states: 8.3 and 0.84 mm for the two Kinovas, 9.3 and 0.25 mm for the UR5-Kinova far range,
-whose distance certificate reads 7.8 mm): their learned distance reads points that k-means placed in each
-link's collision geometry, which are not mirror images of each other, so their boundary is
-symmetric only as closely as the distance is learned (its certified level: 8.5 mm); the mirror
+2000 states: 8.3 and 0.84 mm for the two Kinovas, 9.3 and 0.25 mm for the UR5-Kinova far range):
+their learned distance reads points that k-means placed in each link's collision geometry, which
+are not mirror images of each other, so their boundary is symmetric only as closely as the
+distance is learned (its certified level: 8.5 and 7.8 mm); the mirror
 map itself holds on the exact geometry (the build's check). The ``bc+sym`` value is folded,
 so exactly symmetric; its certificates were taken on it as it is."""
 

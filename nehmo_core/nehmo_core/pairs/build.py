@@ -380,6 +380,8 @@ class PairBuild:
         unlearned = [
             unlearned_warning(g, c["pde"]) for g, c in checks.items() if not c.get("learned", 1)
         ]
+        low_high = " ".join(f"{r:g}" for r in self.base_range or ())
+        ranged = f" --base-range {low_high} --tag {self.tag}" if low_high else ""
         card = {
             "what": (
                 f"pose-conditioned pair models of {self.robots[0]} and {self.robots[1]}: learned "
@@ -388,10 +390,7 @@ class PairBuild:
             ),
             "command": (
                 f"nehmo pair build {self.robots[0]} {self.robots[1]} --budget "
-                f"{self.budget_name} --seed {self.seed} --threads {self.threads}"
-                + ("" if self.base_range is None else " --base-range {:g} {:g} --tag {}").format(
-                    *(self.base_range or ()), self.tag
-                )
+                f"{self.budget_name} --seed {self.seed} --threads {self.threads}" + ranged
             ),
             "budget": {"name": self.budget_name, **asdict(self.budget)},
             "seed": self.seed,

@@ -78,11 +78,9 @@ def value_stage(build: PairBuild, game: str) -> tuple[list[str], dict[str, Any]]
     """The stage's commands and figures (see the module docstring)."""
     attempts: list[dict[str, Any]] = []
     for pde_loss in PDE_LOSSES:
-        run = (
-            build.work / f"value_{game}"
-            if pde_loss == PDE_LOSSES[0]
-            else (build.work / f"value_{game}_{pde_loss}")
-        )
+        # the first attempt's folder is the one builds before the retry used (they resume)
+        suffix = "" if pde_loss == PDE_LOSSES[0] else f"_{pde_loss}"
+        run = build.work / f"value_{game}{suffix}"
         command = _train(build, game, run, pde_loss)
         meta = _install(build, game, run, command)
         check = build.probe(
