@@ -112,9 +112,10 @@ def _boundary_and_gradient(network: ValueNetwork, x: Tensor) -> tuple[Tensor, Te
     return lhat.detach(), grad.detach()
 
 
-def _dirichlet_penalty(settings: TrainSettings, residual: Tensor) -> Tensor:
-    """The Dirichlet term of the loss: mean ``|r|`` (``l1``) or mean ``r²`` (``l2``)."""
-    if settings.dirichlet_loss == "l2":
+def _penalty(kind: str, residual: Tensor) -> Tensor:
+    """A term of the loss: mean ``|r|`` (``l1``) or mean ``r²`` (``l2``); ``kind`` is the
+    settings' ``dirichlet_loss`` or ``pde_loss``."""
+    if kind == "l2":
         return (residual * residual).mean()
     return residual.abs().mean()
 
@@ -134,7 +135,7 @@ def loss_terms(
     if pretraining:
         _, residual = network.forward_with_residual(tau, x)
         dirichlet = residual.abs().mean()
-        penalty = _dirichlet_penalty(settings, residual)
+        penalty = _penalty(settings.dirichlet_loss, residual)
         return {"loss": settings.dirichlet_weight * penalty, "dirichlet": dirichlet, "pde": zero}
     tau = tau.detach().requires_grad_(True)
     x = x.detach().requires_grad_(True)
@@ -161,10 +162,13 @@ def loss_terms(
     pde = pde_residual.abs().mean()
     if bool(boundary_mask.any()):
         on_boundary = residual[boundary_mask]
-        dirichlet, penalty = on_boundary.abs().mean(), _dirichlet_penalty(settings, on_boundary)
+        dirichlet, penalty = (
+            on_boundary.abs().mean(),
+            _penalty(settings.dirichlet_loss, on_boundary),
+        )
     else:
         dirichlet = penalty = zero
-    pde_penalty = (pde_residual * pde_residual).mean() if settings.pde_loss == "l2" else pde
+    pde_penalty = _penalty(settings.pde_loss, pde_residual)
     loss = settings.dirichlet_weight * penalty + settings.pde_weight * pde_penalty
     if settings.gradient_weight > 0:
         loss = loss + settings.gradient_weight * slope
