@@ -30,7 +30,11 @@ import sys
 from pathlib import Path
 
 from nehmo_core.planning.settings import PlannerSettings
-from nehmo_core.verify.report import certificate_stem, certificates_table
+from nehmo_core.verify.report import (
+    certificate_json_actuators,
+    certificate_stem,
+    certificates_table,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "results" / "certificates"
@@ -48,6 +52,11 @@ MODELS = [  # (pair, variant, episode setups whose logs hold its pair states)
     ("panda_panda_any", "bc", ("visit",)),
     ("ur5_panda_any", "bc", ("visit",)),
     ("panda_ur5_any", "bc", ("visit",)),
+    ("kinova_gen3_6dof_kinova_gen3_6dof_any", "bc+sym", ("visit",)),
+    ("kinova_gen3_6dof_panda_any", "bc", ("visit",)),
+    ("panda_kinova_gen3_6dof_any", "bc", ("visit",)),
+    ("ur5_kinova_gen3_6dof_far", "bc+sym", ("visit",)),
+    ("kinova_gen3_6dof_ur5_far", "bc+sym", ("visit",)),
 ]
 # the Panda pairs (bc: no mirror map) are the planner's models, so certified at the settled horizon
 PLANNER_BC = {pair for pair, _, setups in MODELS if setups == ("visit",)}
@@ -94,15 +103,25 @@ def main() -> int:
                     subprocess.run(cmd, check=True)
     certs = [json.loads(p.read_text()) for p in sorted(OUT.glob("*.json"))]
     table = certificates_table(
-        sorted(certs, key=lambda c: (c["model"], c["tau"], c["distribution"]["name"]))
+        sorted(
+            certs,
+            key=lambda c: (
+                c["model"],
+                c["tau"],
+                c["distribution"]["name"],
+                certificate_json_actuators(c),
+            ),
+        )
     )
     (OUT.parent / "certificates.md").write_text(
         "# Certificates of the shipped value functions\n\n"
         "α = 1 %, β = 1e-3; made by `bench/certify_models.py`. Visited states: `nehmo` episodes "
         "of seed 31 (dual_ur5, five_ur5, ur5_kinova_challenging, 20 each); for `ur5_ur5_any`, "
-        "of Ha et al.'s 46 obstacle-free tasks; for the Panda pairs, of their build's visit cells "
-        "(`nehmo pair build`). Wall times were measured with other jobs on the second core.\n\n"
-        + table
+        "of Ha et al.'s 46 obstacle-free tasks; for the pairs made by `nehmo pair build` (the "
+        "Panda's and Kinova's pairs, the far UR5-Kinova range), of their build's visit cells. "
+        "`actuators`: how the controlled arm tracks its control in the rollouts (`nehmo verify "
+        "--actuators`; `bench/results/actuators/README.md`). Wall times were measured with other "
+        "jobs on the second core.\n\n" + table
     )
     print(table)
     return 0

@@ -73,7 +73,8 @@ def main() -> int:
         )
         cert = stages["distance-certificate"]["figures"]
         lines.append(
-            f"- Distance certificate (uniform contact states, N = {cert['colliding']}, "
+            f"- Distance certificate ({cert.get('distribution', 'uniform')} contact states, "
+            f"N = {cert['colliding']}, "
             f"α = {cert['alpha']}, β = {cert['beta']}): certified level "
             f"{_mm(cert['level_m']) if cert['certified'] else 'none'} mm; "
             f"{cert['false_safe_at_zero']} contacts read above 0."
@@ -118,8 +119,8 @@ def main() -> int:
                 )
             if name.startswith("falsify:"):
                 lines.append(
-                    f"- `{name[8:]}` falsification at the planner's margin ε = "
-                    f"{_mm(f['epsilon'])} mm: {f['contacts']} contacts in {f['states']} "
+                    f"- `{name[8:]}` falsification at ε = {_mm(f['epsilon'])} mm (at most the "
+                    f"planner's margin, so no easier): {f['contacts']} contacts in {f['states']} "
                     f"rollouts (bound {100 * f['bound']:.2f} % at confidence 0.999)."
                 )
         if pair in notes:

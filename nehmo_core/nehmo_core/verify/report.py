@@ -69,15 +69,22 @@ def _band_row(band: dict[str, Any]) -> str:
     return f"| {label} | {band['states']} | {band['violations']} |"
 
 
+def certificate_json_actuators(cert: dict[str, Any]) -> str:
+    """The actuator model a certificate's JSON (``nehmo verify --out``) was made under."""
+    return str((cert.get("settings", {}).get("actuator") or {}).get("name", "ideal"))
+
+
 def certificates_table(certs: Sequence[dict[str, Any]]) -> str:
     """Several certificates (their JSON dicts) as one Markdown table."""
     lines = [
-        "| model | τ [s] | distribution | δ [m] | N | violations | ε bound | certified | wall s |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| model | τ [s] | distribution | actuators | δ [m] | N | violations | ε bound | certified "
+        "| wall s |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for c in certs:
         lines.append(
-            f"| {c['model']} | {c['tau']:g} | {c['distribution']['name']} | {c['delta']:.3f} | "
+            f"| {c['model']} | {c['tau']:g} | {c['distribution']['name']} | "
+            f"{certificate_json_actuators(c)} | {c['delta']:.3f} | "
             f"{c['samples']} | {c['violations']} | {c['epsilon']:.3%} | "
             f"{'yes' if c['certified'] else 'no'} | {c['wall_time_s']:.0f} |"
         )
