@@ -19,6 +19,7 @@ from nehmo_core.verify.adversaries import make_adversaries
 from nehmo_core.verify.cards import certified_level, record_certificate
 from nehmo_core.verify.certify import VerifySettings, certify
 from nehmo_core.verify.distributions import UniformBox
+from nehmo_core.verify.report import certificates_table
 from nehmo_core.verify.rollout import rollout_margins
 from nehmo_core.verify.truth import exact_margin
 
@@ -137,3 +138,24 @@ def test_a_planner_takes_its_margin_from_its_actuator_models_certificates() -> N
         [replace(base, certificates=(*certs, visited))], [0], 0.05, 0.01, TAU, actuators="realistic"
     )
     assert both.epsilon == 0.13
+
+
+def test_the_certificates_table_names_each_rows_actuator_model() -> None:
+    """Two certificates of one model, τ and distribution differ only in how the arm tracked its
+    control: the table tells them apart (they once read as duplicates)."""
+    base = {
+        "model": "ur5_ur5 (bc+sym)",
+        "tau": 0.3,
+        "distribution": {"name": "uniform"},
+        "delta": 0.011,
+        "samples": 3000,
+        "violations": 8,
+        "epsilon": 0.0076,
+        "certified": True,
+        "wall_time_s": 80.0,
+        "settings": {"tau": 0.3},
+    }
+    real = {**base, "delta": 0.033, "settings": {"actuator": {"name": "realistic"}}}
+    rows = certificates_table([base, real]).splitlines()[2:]
+    assert [r.split("|")[4].strip() for r in rows] == ["ideal", "realistic"]
+    assert [r.split("|")[5].strip() for r in rows] == ["0.011", "0.033"]
