@@ -100,6 +100,16 @@ def main() -> int:
                         f"{_mm(d['mean_fall_at_horizon'])} mm: "
                         + ("a learned value." if b["learned"] else "**learned little**.")
                     )
+                tries = f.get("attempts", [])
+                if len(tries) > 1:
+                    lines.append(
+                        f"- `{name[6:]}` trained {len(tries)} times: "
+                        + ", ".join(
+                            f"--pde-loss {a['pde_loss']} residual {a['residual_ratio']:.2f}"
+                            for a in tries
+                        )
+                        + f"; kept {f.get('pde_loss')}."
+                    )
             if name.startswith(("certify:", "certify-visited:")):
                 lines.append(
                     f"- `{name.split(':')[1]}` value certificate at τ = {f['tau']} s "

@@ -89,7 +89,11 @@ def test_a_learned_value_a_trivial_one_and_ripples_are_told_apart() -> None:
     assert rippled.slope_ratio > 2.0
     assert rippled.model_fall_share < 0.5 * rippled.must_fall_share
     assert rippled.mean_fall_at_horizon < 0.005
-    assert "learned little" in unlearned_warning("ur5_ur5", rippled.to_dict())
+    first = unlearned_warning("ur5_ur5", rippled.to_dict())
+    assert "learned little" in first and "--pde-loss l2" in first
+    # after both losses the advice does not send the user to the one already tried
+    both = unlearned_warning("ur5_ur5", rippled.to_dict(), ["l1", "l2"])
+    assert "trained with --pde-loss l1, l2" in both and "or with --pde-loss l2" not in both
 
 
 @pytest.mark.parametrize(

@@ -22,6 +22,7 @@ clearly better than that trivial level.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -130,16 +131,23 @@ def learned_value(d: PdeDiagnostics) -> bool:
     return d.slope_ratio < SLOPE_LIMIT and d.model_fall_share >= 0.5 * d.must_fall_share
 
 
-def unlearned_warning(game: str, pde: dict[str, Any]) -> str:
+def unlearned_warning(game: str, pde: dict[str, Any], tried: Sequence[str] = ()) -> str:
     """The line a pair build prints for a value function that reads as no learned value
-    (``pde``: a :class:`PdeDiagnostics` as a dict)."""
+    (``pde``: a :class:`PdeDiagnostics` as a dict; ``tried``: the PDE losses already trained,
+    so the advice does not repeat them)."""
     slope, fall = pde.get("slope_ratio"), pde.get("model_fall_share")
+    advice = "train longer or with a larger --gradient-weight"
+    if "l2" not in tried:
+        advice += ", or with --pde-loss l2"
+    done = ""
+    if len(tried) > 1:
+        done = f" (trained with --pde-loss {', '.join(tried)}; the attempt nearest its PDE kept)"
     return (
-        f"value function {game} learned little beyond its boundary (slope ratio "
+        f"value function {game}{done} learned little beyond its boundary (residual "
+        f"{pde['residual_ratio']:.2f} of V = l's, slope ratio "
         f"{'-' if slope is None else f'{slope:.2f}'}, H < 0 on "
         f"{'-' if fall is None else f'{fall:.2f}'} of states against "
         f"{pde['must_fall_share']:.2f} for V = l, mean l - V(T) "
         f"{pde['mean_fall_at_horizon']:.4f} m): its certificates hold, but its V is close to a "
-        "distance; train longer, with a larger --gradient-weight or with --pde-loss l2 "
-        "(docs/value-functions.md)"
+        f"distance; {advice} (docs/value-functions.md)"
     )

@@ -100,12 +100,14 @@ def value_stage(build: PairBuild, game: str) -> tuple[list[str], dict[str, Any]]
                 "PDE loss",
                 file=sys.stderr,
             )
-        else:
-            tqdm.write(f"  warning: {unlearned_warning(game, check['pde'])}", file=sys.stderr)
     kept = next(
         (a for a in attempts if a["check"]["learned"]),
         min(attempts, key=lambda a: a["check"]["pde"]["residual_ratio"]),
     )
+    if not kept["check"]["learned"]:  # the kept attempt's figures, and what was tried
+        tried = [a["pde_loss"] for a in attempts]
+        warning = unlearned_warning(game, kept["check"]["pde"], tried)
+        tqdm.write(f"  warning: {warning}", file=sys.stderr)
     if kept is not attempts[-1]:  # the model folder holds the last attempt: put the kept one back
         _install(build, game, kept["run"], kept["command"])
     figures = {
