@@ -374,18 +374,13 @@ class PairBuild:
 
     def _card(self) -> StageRecord:
         stages = {k: v for k, v in self.state["stages"].items()}
-        checks = {
-            k[6:]: v["figures"]["below_boundary"] for k, v in stages.items() if k[:6] == "value:"
-        }
-        tried = {
-            k[6:]: [a["pde_loss"] for a in v["figures"].get("attempts", [])]
-            for k, v in stages.items()
-            if k[:6] == "value:"
-        }
+        values = {k[6:]: v["figures"] for k, v in stages.items() if k[:6] == "value:"}
         unlearned = [
-            unlearned_warning(g, c["pde"], tried[g])
-            for g, c in checks.items()
-            if not c.get("learned", 1)
+            unlearned_warning(
+                g, f["below_boundary"]["pde"], [a["pde_loss"] for a in f.get("attempts", [])]
+            )
+            for g, f in values.items()
+            if not f["below_boundary"].get("learned", 1)
         ]
         low_high = " ".join(f"{r:g}" for r in self.base_range or ())
         ranged = f" --base-range {low_high} --tag {self.tag}" if low_high else ""
