@@ -2,6 +2,7 @@
 
     ./run python bench/goal_margins.py --seeds 0,34,35   # bench/results/goal_margins.{json,md}
     ./run python bench/goal_margins.py --runs OUT1,OUT2 --out NAME   # bench/results/NAME.{json,md}
+    ./run python bench/goal_margins.py --task-run OUT --tasks DIR --out NAME   # by arm count
 
 For every scenario of a set, all arms are put at their goals and each arm's problem Opt is
 built there as the planner would (worst-case peer prediction over ``t_plan``,
@@ -18,6 +19,10 @@ With ``--runs``: ``nehmo evaluate`` output folders (their ``summary.json`` and s
 the ``nehmo`` row's success rate by the goals' *separation* (the smallest exact PyBullet distance
 between two arms with every arm at its goal, in bins of :data:`SEPARATIONS`) beside the same
 margin test at the certified ε of each cell's models.
+
+With ``--task-run``: one ``nehmo evaluate --tasks DIR`` output folder and the task files it ran
+(``--tasks``), the success rate of each row by arm count and goal separation (no margin test:
+every task has its own cell).
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ from typing import Any
 import numpy as np
 from _report import machine_at_end, write_report
 
+from nehmo_core.eval.ha_tasks import load_task
 from nehmo_core.eval.scenario_sets import goal_separation
 from nehmo_core.eval.setups import get_setup
 from nehmo_core.geometry.pybullet_world import CellWorld
@@ -242,12 +248,61 @@ def runs_markdown(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def task_run(run_dir: Path, tasks: Path) -> dict[str, Any]:
+    """Successes / episodes of every row of a task-set evaluation, by arm count and by the
+    goals' separation (each task's own cell, from its file in ``tasks``)."""
+    summary = json.loads((run_dir / "summary.json").read_text())
+    rows: dict[str, dict[str, dict[str, Counter[str]]]] = {}
+    for row in summary["rows"]:
+        by_arms = rows.setdefault(row["row"], {})
+        for e in row["episodes"]:
+            task = load_task(tasks / f"{e['task']}.json")
+            with CellWorld(task.cell) as world:
+                label = bin_label(goal_separation(world, task.scenario.goal))
+            counts = by_arms.setdefault(str(e["arms"]), {}).setdefault(label, Counter())
+            counts[e["outcome"]] += 1
+    return {"machine": machine_at_end(), "run": run_dir.name, "rows": rows}
+
+
+def task_run_markdown(report: dict[str, Any]) -> str:
+    labels = [bin_label(x) for x in (0.0, *SEPARATIONS)]
+    lines = [
+        "# Success by arm count and how far apart the goals are",
+        "",
+        "Successes / tasks of each row, by the goals' separation (the smallest exact distance "
+        "between two arms with every arm at its goal): `bench/goal_margins.py --task-run` (its "
+        "docstring).",
+        "",
+        "| row | arms | " + " | ".join(labels) + " | all |",
+        "|---|---|" + "---|" * (len(labels) + 1),
+    ]
+    for row, by_arms in report["rows"].items():
+        for arms, bins in sorted(by_arms.items(), key=lambda kv: int(kv[0])):
+            cells = [
+                f"{bins[x]['success']} / {sum(bins[x].values())}" if x in bins else "–"
+                for x in labels
+            ]
+            ok = sum(c["success"] for c in bins.values())
+            n = sum(sum(c.values()) for c in bins.values())
+            lines.append(f"| {row} | {arms} | " + " | ".join(cells) + f" | {ok} / {n} |")
+    lines += ["", f"Machine: {report['machine']}.", ""]
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="0", help="comma-separated scenario-set seeds")
     parser.add_argument("--runs", help="comma-separated `nehmo evaluate` output folders")
+    parser.add_argument("--task-run", help="one `nehmo evaluate --tasks` output folder")
+    parser.add_argument("--tasks", help="the task files that run used (with --task-run)")
     parser.add_argument("--out", default="goal_separation", help="result name (with --runs)")
     args = parser.parse_args()
+    if args.task_run:
+        if not args.tasks:
+            parser.error("--task-run needs --tasks DIR (the task files the run used)")
+        report = task_run(Path(args.task_run), Path(args.tasks))
+        print(write_report(RESULTS, args.out, report, task_run_markdown))
+        return
     if args.runs:
         runs = [Path(r) for r in args.runs.split(",") if r]
         report = run_outputs(runs, ModelRegistry())

@@ -18,9 +18,11 @@ from nehmo_core.eval.ha_tasks import HaTask, check_joint_convention, load_task, 
 from nehmo_core.eval.task_generator import (
     BASE_MAX_DISTANCE,
     BASE_MIN_DISTANCE,
+    WORKSPACE_RADIUS,
     TaskGenerator,
     TaskSpec,
     ha_difficulty,
+    hemisphere_point,
     sample_bases,
     task_rng,
     write_tasks,
@@ -115,6 +117,50 @@ def test_goals_are_far_from_starts_and_inside_the_sampling_box(
                 assert np.any([(t >= box[:, 0]) & (t <= box[:, 1]) for t in turns], axis=0).all()
 
 
+def test_hemisphere_points_are_drawn_as_theirs() -> None:
+    rng = np.random.default_rng(0)
+    p = np.array([hemisphere_point(rng) for _ in range(4000)])
+    r = np.linalg.norm(p, axis=1)
+    assert r.max() <= WORKSPACE_RADIUS and p[:, 2].min() >= 0.0
+    assert r.mean() / WORKSPACE_RADIUS == pytest.approx(2 / 3, abs=0.02)  # E[sqrt(u)]
+    azimuth = np.arctan2(p[:, 1], p[:, 0])
+    assert np.histogram(azimuth, bins=4)[0].min() > 900  # uniform around the base
+
+
+def test_ik_configurations_keep_the_rules_and_look_like_their_files(tmp_path: Path) -> None:
+    spec = TaskSpec(3, clearance=0.03, configs="ik")
+    tasks = [load_task(p) for p in write_tasks(spec, seed=3, count=3, out=tmp_path)]
+    ours = []
+    for task in tasks:
+        assert json.loads(task.path.read_text())["generator"]["configs"] == "ik"
+        assert check_joint_convention(task) < 1e-9
+        with CellWorld(task.cell) as world:
+            for q in (task.scenario.start, task.scenario.goal):
+                world.set_configuration(q)
+                assert not world.in_collision(), task.task_id
+                for a, b in itertools.combinations(task.cell.arm_ids, 2):
+                    assert world.distance(a, b) >= spec.clearance
+                for arm in task.cell.arms:
+                    tip = world.link_world_positions(arm.arm_id)[arm.robot.tip_link]
+                    assert np.linalg.norm(tip - np.array(arm.base.xyz)) < WORKSPACE_RADIUS + 0.05
+        for arm in task.cell.arms:
+            start, goal = task.scenario.start[arm.arm_id], task.scenario.goal[arm.arm_id]
+            assert np.linalg.norm(goal_error(goal, start, arm.robot)) >= spec.min_goal_distance
+            for q in (start, goal):
+                assert (q >= arm.robot.lower).all() and (q <= arm.robot.upper).all()
+                ours.append(q)
+    # their files: the elbow on the side of their home posture, the last joint never turned
+    theirs = np.concatenate(
+        [
+            np.array(json.loads(p.read_text())[k])
+            for p in sorted(HA_TASKS.glob("*.json"))
+            for k in ("start_config", "goal_config")
+        ]
+    )
+    for q in (theirs, np.array(ours)):
+        assert (q[:, 2] > 0).all() and np.abs(q[:, 5]).max() < 1e-3
+
+
 def test_same_seed_same_files_other_seed_other_files(tmp_path: Path) -> None:
     spec = TaskSpec(2)
     a, b, c = (write_tasks(spec, s, 2, tmp_path / f"{s}_{i}") for i, s in enumerate((4, 4, 5)))
@@ -179,6 +225,7 @@ def test_an_impossible_request_fails_with_what_to_relax() -> None:
         (["--arms", "2", "--clearance", "-0.1"], "--clearance"),
         (["--arms", "2", "--min-goal-distance", "inf"], "--min-goal-distance"),
         (["--arms", "2", "--out", "{file}"], "--out"),
+        (["--arms", "2", "--configs", "joints"], "--configs"),
         (["--arms", "2", "--out", "{file}/sub"], "--out"),
         (["--arms", "2", "--count", "1", "--min-goal-distance", "100"], "minimum goal distance"),
     ],

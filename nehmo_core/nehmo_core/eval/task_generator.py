@@ -10,8 +10,13 @@ writes task files in the format of Ha et al.'s multi-arm benchmark (CoRL 2020), 
   >= 0.3 m from all others and within 1.0 m of at least one. Yaw uniform in [0, 2π); every base
   table-mounted at z = 0. (Their own sampler chains each base to the previous one by an offset
   uniform in ±1.0 m per axis and redraws the layout when a pair is closer than 0.3 m.)
-* Start, then goal, drawn arm by arm: each arm uniform in the robot's scenario sampling box
-  (:func:`~nehmo_core.sim.scenarios.sampling_box`), kept when it is free of self-collision
+* Start, then goal, drawn arm by arm: each arm (``configs="uniform"``, the default) uniform in
+  the robot's scenario sampling box (:func:`~nehmo_core.sim.scenarios.sampling_box`), or
+  (``configs="ik"``, as Ha et al.'s code draws them) PyBullet's inverse kinematics for the
+  robot's tip link, started from :data:`HOME` (the middle of the joint limits for a robot it
+  does not list), toward a point drawn as they draw it in the hemisphere of radius
+  :data:`WORKSPACE_RADIUS` around the base, the solution kept only within the joint limits;
+  either way kept when it is free of self-collision
   (:class:`~nehmo_core.geometry.pybullet_world.CellWorld`'s rule) and at least ``clearance``
   (default 0.02 m, signed PyBullet distance) from every arm placed before it; a goal must also
   lie at least ``min_goal_distance`` (default 0.5 rad, L2 norm of the wrapped joint differences)
@@ -39,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pybullet as pb
 import torch
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
@@ -59,6 +65,7 @@ __all__ = [
     "TaskGenerator",
     "TaskSpec",
     "ha_difficulty",
+    "hemisphere_point",
     "sample_bases",
     "task_id",
     "task_rng",
@@ -71,6 +78,10 @@ BASE_HEIGHT = 0.0  # [m] table-mounted
 BASE_TRIES = 1000  # draws per base
 DIFFICULTY_RADIUS = 0.85  # [m] their UR5 reach radius in the difficulty score
 DIFFICULTY_STEP = 0.05  # [m] their grid
+CONFIGS = ("uniform", "ik")  # how a start or goal is drawn
+WORKSPACE_RADIUS = 0.85  # [m] their UR5's workspace hemisphere
+HOME = {HA_BENCHMARK_ROBOT: (-math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)}
+"""Their inverse kinematics' start posture, per robot [rad] (their UR5's home)."""
 
 
 @dataclass(frozen=True)
@@ -84,6 +95,7 @@ class TaskSpec:
     arm_tries: int = 100  # draws per arm before the configuration starts over
     restarts: int = 50  # configurations tried per base layout
     layouts: int = 3  # base layouts tried per task
+    configs: str = "uniform"  # how each start and goal is drawn (CONFIGS)
 
     def __post_init__(self) -> None:
         if self.arms < 1:
@@ -96,6 +108,8 @@ class TaskSpec:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise InvalidValueError(name, "must be a finite number >= 0", value)
+        if self.configs not in CONFIGS:
+            raise InvalidValueError("configs", f"must be one of {list(CONFIGS)}", self.configs)
         for name in ("arm_tries", "restarts", "layouts"):
             if getattr(self, name) < 1:
                 raise InvalidValueError(name, "must be >= 1", getattr(self, name))
@@ -130,6 +144,20 @@ def sample_bases(count: int, rng: np.random.Generator) -> list[Pose]:
         Pose((float(p[0]), float(p[1]), BASE_HEIGHT), (0.0, 0.0, float(y)))
         for p, y in zip(xy, yaws, strict=True)
     ]
+
+
+def hemisphere_point(rng: np.random.Generator, radius: float = WORKSPACE_RADIUS) -> np.ndarray:
+    """A point [m] in the upper hemisphere of ``radius`` around the origin, drawn as Ha et al.
+    draw their targets: azimuth and elevation uniform, the distance ``radius·√u``."""
+    i, j, k = rng.uniform(size=3)
+    r, elevation = radius * math.sqrt(j), k * math.pi / 2
+    return r * np.array(
+        [
+            math.cos(2 * math.pi * i) * math.cos(elevation),
+            math.sin(2 * math.pi * i) * math.cos(elevation),
+            math.sin(elevation),
+        ]
+    )
 
 
 def ha_difficulty(positions: Any, radius: float = DIFFICULTY_RADIUS) -> float:
@@ -189,7 +217,11 @@ class TaskGenerator:
         """One draw of ``arm`` that passes the rules given the arms ``placed``, or None."""
         spec, robot = self.spec, arm.robot
         for _ in range(spec.arm_tries):
-            q = sample_configuration(robot, rng)
+            q = self._inverse_kinematics(rng) if spec.configs == "ik" else None
+            if q is None and spec.configs == "ik":
+                continue  # beyond the joint limits
+            if q is None:
+                q = sample_configuration(robot, rng)
             if (
                 start is not None
                 and np.linalg.norm(goal_error(q, start, robot)) < spec.min_goal_distance
@@ -203,6 +235,31 @@ class TaskGenerator:
             if all(self.world.distance(arm.arm_id, o, cutoff) >= spec.clearance for o in placed):
                 return q
         return None
+
+    def _inverse_kinematics(self, rng: np.random.Generator) -> np.ndarray | None:
+        """One inverse-kinematics draw (``configs="ik"``), or None beyond the joint limits."""
+        robot, world = self.robot, self.solo
+        arm = world.cell.arm_ids[0]
+        home = HOME.get(robot.name)
+        world.set_joint_positions(
+            arm, np.mean([robot.lower, robot.upper], axis=0) if home is None else home
+        )
+        body, client = world.body(arm), world.client
+        solution = pb.calculateInverseKinematics(
+            body,
+            world.link_index(arm, robot.tip_link),
+            hemisphere_point(rng).tolist(),
+            physicsClientId=client,
+        )
+        movable = [
+            j
+            for j in range(pb.getNumJoints(body, physicsClientId=client))
+            if pb.getJointInfo(body, j, physicsClientId=client)[2] != pb.JOINT_FIXED
+        ]
+        q = np.array([solution[movable.index(j)] for j in world.joint_indices(arm)])
+        if np.any(q < robot.lower) or np.any(q > robot.upper):
+            return None
+        return q
 
     def _configuration(
         self, cell: Cell, rng: np.random.Generator, start: dict[str, np.ndarray] | None = None

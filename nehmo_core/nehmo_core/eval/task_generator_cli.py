@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from nehmo_core.errors import InvalidValueError, as_options
-from nehmo_core.eval.task_generator import TaskSpec, task_rng, write_tasks
+from nehmo_core.eval.task_generator import CONFIGS, TaskSpec, task_rng, write_tasks
 from nehmo_core.robots.descriptions import robot_names
 from nehmo_core.robots.registry import HA_BENCHMARK_ROBOT
 
@@ -28,6 +28,7 @@ _OPTIONS = {
     "robot": "--robot",
     "clearance": "--clearance",
     "min_goal_distance": "--min-goal-distance",
+    "configs": "--configs",
     "count": "--count",
     "seed": "--seed",
     "out": "--out",
@@ -65,6 +66,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="[rad] each arm's goal at least this far from its start, L2 of the wrapped joint "
         f"differences (default {TaskSpec.min_goal_distance})",
     )
+    g.add_argument(
+        "--configs",
+        default=TaskSpec.configs,
+        help=f"how starts and goals are drawn, one of {', '.join(CONFIGS)}: uniform in the "
+        "robot's sampling box, or by "
+        "inverse kinematics toward a point in the workspace hemisphere as Ha et al.'s code draws "
+        f"them (default {TaskSpec.configs})",
+    )
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -83,7 +92,9 @@ def _prepare_out(out: Path) -> None:
 
 def run(args: argparse.Namespace) -> int:
     with as_options(_OPTIONS):
-        spec = TaskSpec(args.arms, args.robot, args.clearance, args.min_goal_distance)
+        spec = TaskSpec(
+            args.arms, args.robot, args.clearance, args.min_goal_distance, configs=args.configs
+        )
         if args.count < 1:
             raise InvalidValueError("count", "must be >= 1", args.count)
         task_rng(args.seed, spec.arms, 0)  # checks the seed
