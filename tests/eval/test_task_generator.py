@@ -161,6 +161,17 @@ def test_ik_configurations_keep_the_rules_and_look_like_their_files(tmp_path: Pa
         assert (q[:, 2] > 0).all() and np.abs(q[:, 5]).max() < 1e-3
 
 
+@pytest.mark.parametrize("robot", [r for r in ROBOT_NAMES if r != HA_BENCHMARK_ROBOT])
+def test_ik_configurations_of_other_robots_start_inside_their_limits(robot: str) -> None:
+    with TaskGenerator(TaskSpec(2, robot=robot, configs="ik")) as generator:
+        raw = generator.generate(0, 0)
+        lower, upper = generator.robot.lower, generator.robot.upper
+    for q in (*raw["start_config"], *raw["goal_config"]):
+        q = np.array(q)
+        assert np.isfinite(q).all() and (q >= lower).all() and (q <= upper).all()
+    assert raw["generator"]["configs"] == "ik" and raw["robot"] == robot
+
+
 def test_same_seed_same_files_other_seed_other_files(tmp_path: Path) -> None:
     spec = TaskSpec(2)
     a, b, c = (write_tasks(spec, s, 2, tmp_path / f"{s}_{i}") for i, s in enumerate((4, 4, 5)))

@@ -13,10 +13,10 @@ writes task files in the format of Ha et al.'s multi-arm benchmark (CoRL 2020), 
 * Start, then goal, drawn arm by arm: each arm (``configs="uniform"``, the default) uniform in
   the robot's scenario sampling box (:func:`~nehmo_core.sim.scenarios.sampling_box`), or
   (``configs="ik"``, as Ha et al.'s code draws them) PyBullet's inverse kinematics for the
-  robot's tip link, started from :data:`HOME` (the middle of the joint limits for a robot it
-  does not list), toward a point drawn as they draw it in the hemisphere of radius
-  :data:`WORKSPACE_RADIUS` around the base, the solution kept only within the joint limits;
-  either way kept when it is free of self-collision
+  robot's tip link, started from :data:`HOME` (for a robot it does not list, the middle of the
+  joint limits, 0 for a joint that wraps), toward a point drawn as they draw it in the
+  hemisphere of radius :data:`WORKSPACE_RADIUS` around the base, the solution kept only within
+  the joint limits; either way kept when it is free of self-collision
   (:class:`~nehmo_core.geometry.pybullet_world.CellWorld`'s rule) and at least ``clearance``
   (default 0.02 m, signed PyBullet distance) from every arm placed before it; a goal must also
   lie at least ``min_goal_distance`` (default 0.5 rad, L2 norm of the wrapped joint differences)
@@ -241,9 +241,10 @@ class TaskGenerator:
         robot, world = self.robot, self.solo
         arm = world.cell.arm_ids[0]
         home = HOME.get(robot.name)
-        world.set_joint_positions(
-            arm, np.mean([robot.lower, robot.upper], axis=0) if home is None else home
-        )
+        if home is None:  # the middle of each joint's limits, 0 for a joint that wraps
+            wraps = robot.continuous
+            home = (np.where(wraps, 0.0, robot.lower) + np.where(wraps, 0.0, robot.upper)) / 2
+        world.set_joint_positions(arm, home)
         body, client = world.body(arm), world.client
         solution = pb.calculateInverseKinematics(
             body,
