@@ -240,11 +240,9 @@ class TaskGenerator:
         """One inverse-kinematics draw (``configs="ik"``), or None beyond the joint limits."""
         robot, world = self.robot, self.solo
         arm = world.cell.arm_ids[0]
-        home = HOME.get(robot.name)
-        if home is None:  # the middle of each joint's limits, 0 for a joint that wraps
-            wraps = robot.continuous
-            home = (np.where(wraps, 0.0, robot.lower) + np.where(wraps, 0.0, robot.upper)) / 2
-        world.set_joint_positions(arm, home)
+        wraps = robot.continuous  # else the middle of each joint's limits, 0 for one that wraps
+        middle = (np.where(wraps, 0.0, robot.lower) + np.where(wraps, 0.0, robot.upper)) / 2
+        world.set_joint_positions(arm, np.array(HOME.get(robot.name, middle)))
         body, client = world.body(arm), world.client
         solution = pb.calculateInverseKinematics(
             body,
