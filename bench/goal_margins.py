@@ -31,6 +31,7 @@ import argparse
 import itertools
 import json
 from collections import Counter
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -170,6 +171,11 @@ def bin_label(d: float) -> str:
     raise AssertionError(d)
 
 
+def success_cell(counts: Mapping[str, int] | None) -> str:
+    """``successes / episodes`` of one table cell (outcome counts), or a dash for None."""
+    return "–" if counts is None else f"{counts.get('success', 0)} / {sum(counts.values())}"
+
+
 def run_outputs(runs: list[Path], registry: ModelRegistry) -> dict[str, Any]:
     """Success by goal separation and by the settled margin, per evaluation output."""
     report: dict[str, Any] = {"machine": machine_at_end(), "runs": {}}
@@ -226,7 +232,7 @@ def runs_markdown(report: dict[str, Any]) -> str:
         for label in labels:
             c = Counter(r["by_separation"].get(label, {}))
             total.setdefault(label, Counter()).update(c)
-            cells.append(f"{c['success']} / {sum(c.values())}" if c else "–")
+            cells.append(success_cell(c or None))
         every: Counter[str] = Counter()
         for c in r["by_separation"].values():
             every.update(c)
@@ -234,13 +240,10 @@ def runs_markdown(report: dict[str, Any]) -> str:
         lines.append(
             f"| {name} | {r['setup']} | {r['seed']} | {r['epsilon']:.4g} | "
             + " | ".join(cells)
-            + f" | {every['success']} / {sum(every.values())} | {cross} |"
+            + f" | {success_cell(every)} | {cross} |"
         )
     if len(report["runs"]) > 1:
-        cells = [
-            f"{total[x]['success']} / {sum(total[x].values())}" if x in total else "–"
-            for x in labels
-        ]
+        cells = [success_cell(total.get(x)) for x in labels]
         ok = sum(c["success"] for c in total.values())
         n = sum(sum(c.values()) for c in total.values())
         lines.append("| all | | | | " + " | ".join(cells) + f" | {ok} / {n} | |")
@@ -278,13 +281,11 @@ def task_run_markdown(report: dict[str, Any]) -> str:
     ]
     for row, by_arms in report["rows"].items():
         for arms, bins in sorted(by_arms.items(), key=lambda kv: int(kv[0])):
-            cells = [
-                f"{bins[x]['success']} / {sum(bins[x].values())}" if x in bins else "–"
-                for x in labels
-            ]
-            ok = sum(c["success"] for c in bins.values())
-            n = sum(sum(c.values()) for c in bins.values())
-            lines.append(f"| {row} | {arms} | " + " | ".join(cells) + f" | {ok} / {n} |")
+            every: Counter[str] = Counter()
+            for c in bins.values():
+                every.update(c)
+            cells = [success_cell(bins.get(x)) for x in labels]
+            lines.append(f"| {row} | {arms} | " + " | ".join(cells) + f" | {success_cell(every)} |")
     lines += ["", f"Machine: {report['machine']}.", ""]
     return "\n".join(lines)
 

@@ -76,10 +76,10 @@ BASE_MIN_DISTANCE = 0.3  # [m] every base at least this far from all others (Ha 
 BASE_MAX_DISTANCE = 1.0  # [m] every new base within this of an earlier one (Ha et al.)
 BASE_HEIGHT = 0.0  # [m] table-mounted
 BASE_TRIES = 1000  # draws per base
-DIFFICULTY_RADIUS = 0.85  # [m] their UR5 reach radius in the difficulty score
+WORKSPACE_RADIUS = 0.85  # [m] their UR5's workspace hemisphere (ik targets, difficulty)
+DIFFICULTY_RADIUS = WORKSPACE_RADIUS  # [m] the reach radius in their difficulty score
 DIFFICULTY_STEP = 0.05  # [m] their grid
 CONFIGS = ("uniform", "ik")  # how a start or goal is drawn
-WORKSPACE_RADIUS = 0.85  # [m] their UR5's workspace hemisphere
 HOME = {HA_BENCHMARK_ROBOT: (-math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)}
 """Their inverse kinematics' start posture, per robot [rad] (their UR5's home)."""
 
@@ -198,6 +198,8 @@ class TaskGenerator:
         self.solo = CellWorld(Cell("self", arms[:1]))  # self-collision checks
         self.kinematics = ArmKinematics(self.robot)
         self.tool = np.eye(4)
+        if spec.configs == "ik":
+            self._ik_setup()
         if self.robot.name == HA_BENCHMARK_ROBOT:
             self.tool[0, 3] = TOOL_OFFSET
 
@@ -217,11 +219,9 @@ class TaskGenerator:
         """One draw of ``arm`` that passes the rules given the arms ``placed``, or None."""
         spec, robot = self.spec, arm.robot
         for _ in range(spec.arm_tries):
-            q = self._inverse_kinematics(rng) if spec.configs == "ik" else None
-            if q is None and spec.configs == "ik":
-                continue  # beyond the joint limits
+            q = self._draw(rng)
             if q is None:
-                q = sample_configuration(robot, rng)
+                continue  # an inverse-kinematics solution beyond the joint limits
             if (
                 start is not None
                 and np.linalg.norm(goal_error(q, start, robot)) < spec.min_goal_distance
@@ -236,26 +236,36 @@ class TaskGenerator:
                 return q
         return None
 
-    def _inverse_kinematics(self, rng: np.random.Generator) -> np.ndarray | None:
-        """One inverse-kinematics draw (``configs="ik"``), or None beyond the joint limits."""
+    def _ik_setup(self) -> None:
+        """What every inverse-kinematics draw shares: the start posture, the tip link and where
+        the arm's joints sit among the body's movable ones (PyBullet's solution order)."""
         robot, world = self.robot, self.solo
         arm = world.cell.arm_ids[0]
         wraps = robot.continuous  # else the middle of each joint's limits, 0 for one that wraps
         middle = (np.where(wraps, 0.0, robot.lower) + np.where(wraps, 0.0, robot.upper)) / 2
-        world.set_joint_positions(arm, np.array(HOME.get(robot.name, middle)))
+        self._home = np.array(HOME.get(robot.name, middle))
+        self._tip = world.link_index(arm, robot.tip_link)
         body, client = world.body(arm), world.client
-        solution = pb.calculateInverseKinematics(
-            body,
-            world.link_index(arm, robot.tip_link),
-            hemisphere_point(rng).tolist(),
-            physicsClientId=client,
-        )
         movable = [
             j
             for j in range(pb.getNumJoints(body, physicsClientId=client))
             if pb.getJointInfo(body, j, physicsClientId=client)[2] != pb.JOINT_FIXED
         ]
-        q = np.array([solution[movable.index(j)] for j in world.joint_indices(arm)])
+        self._solution_index = [movable.index(j) for j in world.joint_indices(arm)]
+
+    def _draw(self, rng: np.random.Generator) -> np.ndarray | None:
+        """One draw of the spec's kind; None for an inverse-kinematics solution beyond the
+        joint limits."""
+        robot = self.robot
+        if self.spec.configs == "uniform":
+            return sample_configuration(robot, rng)
+        world = self.solo
+        arm = world.cell.arm_ids[0]
+        world.set_joint_positions(arm, self._home)
+        solution = pb.calculateInverseKinematics(
+            world.body(arm), self._tip, hemisphere_point(rng).tolist(), physicsClientId=world.client
+        )
+        q = np.array([solution[i] for i in self._solution_index])
         if np.any(q < robot.lower) or np.any(q > robot.upper):
             return None
         return q
