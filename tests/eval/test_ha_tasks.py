@@ -205,6 +205,45 @@ def test_a_resumed_task_run_runs_only_the_unfinished_tasks(
     ]
 
 
+_FINGERPRINTS = """
+import sys
+from pathlib import Path
+import numpy as np
+from nehmo_core.eval import batch, task_runner
+from nehmo_core.eval.ha_tasks import load_task
+from nehmo_core.sim.scenarios import Scenario
+task = load_task(Path(sys.argv[1]))
+print(task_runner._fingerprint(task_runner.TaskConfig(out_dir=Path("out")), "nehmo", task))
+scenario = Scenario({"ur5_0": np.zeros(6)}, {"ur5_0": np.ones(6)})
+job = batch._Job("nehmo", 0, 3, 0, scenario, Path("out/logs/nehmo/episode_0003"))
+print(batch._fingerprint(batch.BatchConfig("dual_ur5", Path("out")), job))
+"""
+
+
+def test_resume_fingerprints_are_the_same_in_every_process(tmp_path: Path) -> None:
+    """``--resume`` keeps an episode only when its fingerprint matches the earlier run's, and
+    that run was another process: string hashing is salted per process, so a fingerprint built
+    from a set's order (the cell's ``repr``) never matched. Two processes with different salts
+    must agree, for task runs and for setup runs."""
+    import os
+    import subprocess
+    import sys
+
+    prints = []
+    for salt in ("1", "2"):
+        env = {**os.environ, "PYTHONHASHSEED": salt}
+        done = subprocess.run(
+            [sys.executable, "-c", _FINGERPRINTS, str(TASKS / "135003.json")],
+            env=env,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        prints.append(done.stdout.split())
+    assert len(prints[0]) == 2 and all(len(p) == 64 for p in prints[0])
+    assert prints[0] == prints[1]
+
+
 def test_tasks_run_for_the_time_limit_given(tmp_path: Path) -> None:
     """``--time-limit`` reaches the task runner: no episode runs past it, and the summary's
     success rule states it."""

@@ -34,6 +34,7 @@ from nehmo_core.cluster import ClusterSpec, make_executor, pack_folder, unpack_f
 from nehmo_core.eval import records
 from nehmo_core.eval.batch import init_worker
 from nehmo_core.eval.episode import EpisodeSettings, run_episode
+from nehmo_core.eval.episode_log import cell_metadata
 from nehmo_core.eval.ha_tasks import HaTask, check_joint_convention, pair_distances
 from nehmo_core.eval.metrics import (
     EpisodeResult,
@@ -263,11 +264,13 @@ def run_tasks(
 
 
 def _fingerprint(config: TaskConfig, row: str, task: HaTask) -> str:
-    """What makes a task's episode the same episode (for ``resume``)."""
+    """What makes a task's episode the same episode (for ``resume``). The cell enters as its
+    names and base poses: its ``repr`` holds sets, whose order changes from one process to the
+    next (string hashing is salted), so a resumed run never matched an earlier one."""
     return records.fingerprint(
         row=row,
         task=task.task_id,
-        cell=repr(task.cell),
+        cell=cell_metadata(task.cell),
         scenario=repr(task.scenario),
         planner_settings=config.planner_settings.to_dict(),
         value_models=[str(v) for v in config.value_models],
