@@ -176,6 +176,11 @@ def success_cell(counts: Mapping[str, int] | None) -> str:
     return "–" if counts is None else f"{counts.get('success', 0)} / {sum(counts.values())}"
 
 
+def pooled(cells: Any) -> Counter[str]:
+    """The outcome counts of several cells added up."""
+    return sum((Counter(c) for c in cells), Counter())
+
+
 def run_outputs(runs: list[Path], registry: ModelRegistry) -> dict[str, Any]:
     """Success by goal separation and by the settled margin, per evaluation output."""
     report: dict[str, Any] = {"machine": machine_at_end(), "runs": {}}
@@ -233,9 +238,7 @@ def runs_markdown(report: dict[str, Any]) -> str:
             c = Counter(r["by_separation"].get(label, {}))
             total.setdefault(label, Counter()).update(c)
             cells.append(success_cell(c or None))
-        every: Counter[str] = Counter()
-        for c in r["by_separation"].values():
-            every.update(c)
+        every = pooled(r["by_separation"].values())
         cross = ", ".join(f"{k}: {v}" for k, v in r["outcomes_by_margin"].items())
         lines.append(
             f"| {name} | {r['setup']} | {r['seed']} | {r['epsilon']:.4g} | "
@@ -244,9 +247,8 @@ def runs_markdown(report: dict[str, Any]) -> str:
         )
     if len(report["runs"]) > 1:
         cells = [success_cell(total.get(x)) for x in labels]
-        ok = sum(c["success"] for c in total.values())
-        n = sum(sum(c.values()) for c in total.values())
-        lines.append("| all | | | | " + " | ".join(cells) + f" | {ok} / {n} | |")
+        every = pooled(total.values())
+        lines.append("| all | | | | " + " | ".join(cells) + f" | {success_cell(every)} | |")
     lines += ["", f"Machine: {report['machine']}.", ""]
     return "\n".join(lines)
 
@@ -281,9 +283,7 @@ def task_run_markdown(report: dict[str, Any]) -> str:
     ]
     for row, by_arms in report["rows"].items():
         for arms, bins in sorted(by_arms.items(), key=lambda kv: int(kv[0])):
-            every: Counter[str] = Counter()
-            for c in bins.values():
-                every.update(c)
+            every = pooled(bins.values())
             cells = [success_cell(bins.get(x)) for x in labels]
             lines.append(f"| {row} | {arms} | " + " | ".join(cells) + f" | {success_cell(every)} |")
     lines += ["", f"Machine: {report['machine']}.", ""]

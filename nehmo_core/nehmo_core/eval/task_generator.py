@@ -77,7 +77,6 @@ BASE_MAX_DISTANCE = 1.0  # [m] every new base within this of an earlier one (Ha 
 BASE_HEIGHT = 0.0  # [m] table-mounted
 BASE_TRIES = 1000  # draws per base
 WORKSPACE_RADIUS = 0.85  # [m] their UR5's workspace hemisphere (ik targets, difficulty)
-DIFFICULTY_RADIUS = WORKSPACE_RADIUS  # [m] the reach radius in their difficulty score
 DIFFICULTY_STEP = 0.05  # [m] their grid
 CONFIGS = ("uniform", "ik")  # how a start or goal is drawn
 HOME = {HA_BENCHMARK_ROBOT: (-math.pi, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)}
@@ -160,7 +159,7 @@ def hemisphere_point(rng: np.random.Generator, radius: float = WORKSPACE_RADIUS)
     )
 
 
-def ha_difficulty(positions: Any, radius: float = DIFFICULTY_RADIUS) -> float:
+def ha_difficulty(positions: Any, radius: float = WORKSPACE_RADIUS) -> float:
     """Ha et al.'s difficulty of a base layout: the largest share of one arm's workspace (the
     half ball of ``radius`` above its base, on their 5 cm grid) within ``radius`` of another
     base."""
@@ -242,6 +241,7 @@ class TaskGenerator:
         robot, world = self.robot, self.solo
         arm = world.cell.arm_ids[0]
         wraps = robot.continuous  # else the middle of each joint's limits, 0 for one that wraps
+        # (a wrapping joint's limits may be infinite: no arithmetic on them)
         middle = (np.where(wraps, 0.0, robot.lower) + np.where(wraps, 0.0, robot.upper)) / 2
         self._home = np.array(HOME.get(robot.name, middle))
         self._tip = world.link_index(arm, robot.tip_link)
