@@ -21,8 +21,9 @@ between two arms with every arm at its goal, in bins of :data:`SEPARATIONS`) bes
 margin test at the certified ε of each cell's models.
 
 With ``--task-run``: one ``nehmo evaluate --tasks DIR`` output folder and the task files it ran
-(``--tasks``), the success rate of each row by arm count and goal separation (no margin test:
-every task has its own cell).
+(``--tasks``), the success rate of each row by arm count and goal separation, and each row's
+outcomes by whether the task's goal set is inside the settled margin (NeHMO's models on the
+task's own cell, every peer announcing the hold bound).
 """
 
 from __future__ import annotations
@@ -255,9 +256,13 @@ def runs_markdown(report: dict[str, Any]) -> str:
 
 def task_run(run_dir: Path, tasks: Path) -> dict[str, Any]:
     """Successes / episodes of every row of a task-set evaluation, by arm count and by the
-    goals' separation (each task's own cell, from its file in ``tasks``)."""
+    goals' separation (each task's own cell, from its file in ``tasks``), and by outcome and
+    whether the task's goal set is inside the settled margin."""
     summary = json.loads((run_dir / "summary.json").read_text())
+    registry = ModelRegistry()
+    inside: dict[str, bool] = {}
     rows: dict[str, dict[str, dict[str, Counter[str]]]] = {}
+    margins: dict[str, dict[str, Counter[str]]] = {}
     for row in summary["rows"]:
         by_arms = rows.setdefault(row["row"], {})
         for e in row["episodes"]:
@@ -266,7 +271,37 @@ def task_run(run_dir: Path, tasks: Path) -> dict[str, Any]:
                 label = bin_label(goal_separation(world, task.scenario.goal))
             counts = by_arms.setdefault(str(e["arms"]), {}).setdefault(label, Counter())
             counts[e["outcome"]] += 1
-    return {"machine": machine_at_end(), "run": run_dir.name, "rows": rows}
+            if e["task"] not in inside:
+                inside[e["task"]] = _inside_settled_margin(task.cell, task.scenario.goal, registry)
+            where = "inside" if inside[e["task"]] else "outside"
+            cross = margins.setdefault(row["row"], {}).setdefault(str(e["arms"]), Counter())
+            cross[f"{e['outcome']}/{where}"] += 1
+    return {
+        "machine": machine_at_end(),
+        "run": run_dir.name,
+        "rows": rows,
+        "outcomes_by_margin": {
+            row: {arms: dict(sorted(c.items())) for arms, c in by_arms.items()}
+            for row, by_arms in margins.items()
+        },
+    }
+
+
+def _inside_settled_margin(cell: Any, goal: Mapping[str, Any], registry: ModelRegistry) -> bool:
+    """Whether some arm's rows break the margin with every arm settled at its goal (each peer
+    announcing the hold bound)."""
+    models = registry.models_for("nehmo", cell)
+    planners: dict[str, NehmoPlanner] = {}
+    for arm in cell.arm_ids:
+        planner = make_planner("nehmo", cell, arm, models)
+        assert isinstance(planner, NehmoPlanner)
+        planners[arm] = planner
+    goals = {a: np.asarray(q) for a, q in goal.items()}
+    try:
+        return goal_margin(planners, goals, BOUNDS[0]) < 0
+    finally:
+        for planner in planners.values():
+            planner.close()
 
 
 def task_run_markdown(report: dict[str, Any]) -> str:
@@ -275,17 +310,24 @@ def task_run_markdown(report: dict[str, Any]) -> str:
         "# Success by arm count and how far apart the goals are",
         "",
         "Successes / tasks of each row, by the goals' separation (the smallest exact distance "
-        "between two arms with every arm at its goal): `bench/goal_margins.py --task-run` (its "
-        "docstring).",
+        "between two arms with every arm at its goal), and the tasks by outcome and by whether "
+        "the goal set is inside the margin that rows against settled peers keep (every peer "
+        f"announcing the hold bound k = {BOUNDS[0]:g}; NeHMO's models and margins whatever the "
+        "row): `bench/goal_margins.py --task-run` (its docstring).",
         "",
-        "| row | arms | " + " | ".join(labels) + " | all |",
-        "|---|---|" + "---|" * (len(labels) + 1),
+        "| row | arms | " + " | ".join(labels) + " | all | outcome × settled margin |",
+        "|---|---|" + "---|" * (len(labels) + 2),
     ]
+    crosses = report.get("outcomes_by_margin", {})
     for row, by_arms in report["rows"].items():
         for arms, bins in sorted(by_arms.items(), key=lambda kv: int(kv[0])):
             every = pooled(bins.values())
             cells = [success_cell(bins.get(x)) for x in labels]
-            lines.append(f"| {row} | {arms} | " + " | ".join(cells) + f" | {success_cell(every)} |")
+            cross = crosses.get(row, {}).get(arms, {})
+            text = ", ".join(f"{k}: {v}" for k, v in cross.items())
+            lines.append(
+                f"| {row} | {arms} | " + " | ".join(cells) + f" | {success_cell(every)} | {text} |"
+            )
     lines += ["", f"Machine: {report['machine']}.", ""]
     return "\n".join(lines)
 
