@@ -61,6 +61,18 @@ SEPARATIONS = (0.01, 0.05, 0.1, 0.2)  # [m] bin edges of the goals' exact separa
 BOUNDS = (PlannerSettings().hold.bound, 0.0)
 
 
+def nehmo_planners(
+    cell: Any, models: Any, settings: PlannerSettings | None = None
+) -> dict[str, NehmoPlanner]:
+    """A NeHMO planner for every arm of ``cell``."""
+    planners: dict[str, NehmoPlanner] = {}
+    for arm in cell.arm_ids:
+        planner = make_planner("nehmo", cell, arm, models, settings)
+        assert isinstance(planner, NehmoPlanner)
+        planners[arm] = planner
+    return planners
+
+
 def goal_margin(
     planners: dict[str, NehmoPlanner], goal: dict[str, np.ndarray], bound: float = 1.0
 ) -> float:
@@ -97,11 +109,11 @@ def run_seed(seed: int, registry: ModelRegistry) -> dict[str, Any]:
         margins: dict[str, list[float]] = {}
         for t_plan in T_PLANS:
             settings = PlannerSettings().override({"opt.t_plan": t_plan})
-            planners = {a: make_planner("nehmo", cell, a, models, settings) for a in cell.arm_ids}
-            margins[str(t_plan)] = [goal_margin(planners, g) for g in goals]  # type: ignore[arg-type]
-        planners = {a: make_planner("nehmo", cell, a, models) for a in cell.arm_ids}
+            planners = nehmo_planners(cell, models, settings)
+            margins[str(t_plan)] = [goal_margin(planners, g) for g in goals]
+        planners = nehmo_planners(cell, models)
         for bound in BOUNDS:
-            margins[f"k={bound:g}"] = [goal_margin(planners, g, bound) for g in goals]  # type: ignore[arg-type]
+            margins[f"k={bound:g}"] = [goal_margin(planners, g, bound) for g in goals]
         path = _where(seed) / table
         rows = json.loads(path.read_text())["rows"] if path.exists() else []
         outcome = {
@@ -192,7 +204,7 @@ def run_outputs(runs: list[Path], registry: ModelRegistry) -> dict[str, Any]:
         row = next(r for r in summary["rows"] if r["row"].split("/")[0] == "nehmo")
         outcome = {e["scenario"]: e["outcome"] for e in row["episodes"]}
         models = registry.models_for("nehmo", cell)
-        planners = {a: make_planner("nehmo", cell, a, models) for a in cell.arm_ids}
+        planners = nehmo_planners(cell, models)
         bins: dict[str, Counter[str]] = {}
         margin: Counter[str] = Counter()
         with CellWorld(cell) as world:
@@ -200,11 +212,9 @@ def run_outputs(runs: list[Path], registry: ModelRegistry) -> dict[str, Any]:
                 goal = {a: np.asarray(q) for a, q in sc.goal.items()}
                 o = outcome.get(i, "not run")
                 bins.setdefault(bin_label(goal_separation(world, goal)), Counter())[o] += 1
-                inside = goal_margin(planners, goal, BOUNDS[0]) < 0  # type: ignore[arg-type]
+                inside = goal_margin(planners, goal, BOUNDS[0]) < 0
                 margin[f"{o}/{'inside' if inside else 'outside'}"] += 1
-        first = next(iter(planners.values()))
-        assert isinstance(first, NehmoPlanner)
-        epsilon = first.settings.opt.epsilon
+        epsilon = next(iter(planners.values())).settings.opt.epsilon
         report["runs"][run_dir.name] = {
             "setup": summary["setup"],
             "seed": summary["seed"],
@@ -290,12 +300,7 @@ def task_run(run_dir: Path, tasks: Path) -> dict[str, Any]:
 def _inside_settled_margin(cell: Any, goal: Mapping[str, Any], registry: ModelRegistry) -> bool:
     """Whether some arm's rows break the margin with every arm settled at its goal (each peer
     announcing the hold bound)."""
-    models = registry.models_for("nehmo", cell)
-    planners: dict[str, NehmoPlanner] = {}
-    for arm in cell.arm_ids:
-        planner = make_planner("nehmo", cell, arm, models)
-        assert isinstance(planner, NehmoPlanner)
-        planners[arm] = planner
+    planners = nehmo_planners(cell, registry.models_for("nehmo", cell))
     goals = {a: np.asarray(q) for a, q in goal.items()}
     try:
         return goal_margin(planners, goals, BOUNDS[0]) < 0
