@@ -3,30 +3,17 @@ it constrains, and the results page written under the given name."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
-import sys
 from pathlib import Path
 
-BENCH = Path(__file__).resolve().parents[2] / "bench"
+from _eval_helpers import bench_module
+
 TASKS = Path(__file__).resolve().parents[1] / "data" / "ha_tasks"
 
 
-def _module():
-    sys.path.insert(0, str(BENCH))
-    try:
-        spec = importlib.util.spec_from_file_location("peer_scaling", BENCH / "peer_scaling.py")
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        return module
-    finally:
-        sys.path.remove(str(BENCH))
-
-
 def test_tasks_mode_times_every_arm_by_constrained_peers(tmp_path, monkeypatch) -> None:
-    bench = _module()
+    bench = bench_module("peer_scaling")
     tasks = tmp_path / "tasks"
     tasks.mkdir()
     for name in ("135011.json", "135003.json"):  # two arms; one arm alone

@@ -3,26 +3,11 @@ summary that is not a task run rejected with its path."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import pytest
-
-BENCH = Path(__file__).resolve().parents[2] / "bench"
-
-
-def _module():
-    sys.path.insert(0, str(BENCH))
-    try:
-        spec = importlib.util.spec_from_file_location("plot_crowds", BENCH / "plot_crowds.py")
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        return module
-    finally:
-        sys.path.remove(str(BENCH))
+from _eval_helpers import bench_module
 
 
 def _summary(path: Path, rows: dict[str, dict[int, tuple[int, int]]]) -> Path:
@@ -40,7 +25,7 @@ def _summary(path: Path, rows: dict[str, dict[int, tuple[int, int]]]) -> Path:
 
 
 def test_wilson_interval_matches_the_closed_form_and_contains_the_rate():
-    plot_crowds = _module()
+    plot_crowds = bench_module("plot_crowds")
     low, high = plot_crowds.wilson(10, 10)
     assert low == pytest.approx(72.25, abs=0.01)  # 10 of 10: n / (n + z²)
     assert high == pytest.approx(100.0)
@@ -52,7 +37,7 @@ def test_wilson_interval_matches_the_closed_form_and_contains_the_rate():
 
 
 def test_every_row_becomes_a_line_and_the_plot_is_written(tmp_path):
-    plot_crowds = _module()
+    plot_crowds = bench_module("plot_crowds")
     a = _summary(tmp_path / "a.json", {"nehmo": {3: (9, 10), 8: (5, 10)}, "naive": {3: (4, 10)}})
     b = _summary(tmp_path / "b.json", {"nehmo": {3: (10, 10)}})
     lines = plot_crowds.series([(None, a), (None, b)])
@@ -66,7 +51,7 @@ def test_every_row_becomes_a_line_and_the_plot_is_written(tmp_path):
 
 
 def test_a_summary_without_arm_counts_is_rejected_by_name(tmp_path):
-    plot_crowds = _module()
+    plot_crowds = bench_module("plot_crowds")
     setup_run = tmp_path / "setup.json"
     setup_run.write_text(json.dumps({"rows": [{"row": "nehmo", "ours": {}}]}))
     with pytest.raises(SystemExit, match="no row has by_arms"):
