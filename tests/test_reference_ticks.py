@@ -9,6 +9,16 @@ starts, Hessian estimates, stall counters, announcements, the silent-path watch)
 command is compared from exactly the inputs it was planned from. Solve deadlines are lifted, so
 no command depends on the machine's speed.
 
+The value networks and the SQP loop run as C compiled with ``-march=native`` and glibc's vector
+math, whose last bits depend on the CPU's instruction set. On the platform a reference was
+recorded on (its CPU signature, compiler and CasADi version, ``meta["platform"]``) every command
+must agree within 1e-9 rad/s; on any other, rounding differences grow through warm starts and
+Hessian estimates (up to 0.022 rad/s measured between two AMD EPYC hosts), so there every
+command must agree within 0.05 rad/s and the largest gap is reported as a warning. That still
+catches changed behaviour: ``escape.stall_ticks`` 13 instead of 12 moves a command of
+``five_ur5`` by 1 rad/s, ``hold.tolerance`` 0.1 by 0.4, ``opt.epsilon`` 0.035 one of
+``dual_ur5_paper`` by 1.
+
 The episodes were chosen to exercise every mechanism: the stall escape, the fail-safe between
 several peers, announced speed bounds and holds, the exact guard, the silent-path watch (a
 reckless Kinova), and the paper's Opt (``nehmo_paper``). Record anew (only when behaviour is
@@ -19,12 +29,16 @@ meant to change, and say so in the commit) with::
 
 from __future__ import annotations
 
+import hashlib
 import json
+import subprocess
 import sys
+import warnings
 from collections import Counter
 from pathlib import Path
 from typing import Any
 
+import casadi
 import numpy as np
 import pytest
 
@@ -33,11 +47,13 @@ from nehmo_core.eval.planners import build_planners
 from nehmo_core.eval.setups import get_setup, parse_row
 from nehmo_core.planning.models.registry import ModelRegistry
 from nehmo_core.planning.nehmo import NehmoPlanner
+from nehmo_core.planning.numerics.codegen import cpu_signature, find_compiler
 from nehmo_core.planning.settings import PlannerSettings
 from nehmo_core.sim.scenarios import ScenarioSet, generate_scenario_set
 
 DATA = Path(__file__).parent / "data" / "reference_ticks"
-TOLERANCE = 1e-9  # [rad/s]
+TOLERANCE = 1e-9  # [rad/s], on the recording platform
+OTHER_PLATFORM_TOLERANCE = 0.05  # [rad/s], elsewhere (see the module docstring)
 #: (name, setup, row, preset, scenario seed, the scenario positions to search, ticks at most)
 CASES = [
     ("five_ur5", "five_ur5", "nehmo", "default", 3, range(12), 250),
@@ -45,6 +61,17 @@ CASES = [
     ("reckless_kinova", "ur5_kinova_challenging", "nehmo/reckless", "default", 3, range(12), 250),
     ("dual_ur5_paper", "dual_ur5", "nehmo_paper", "paper", 3, range(6), 250),
 ]
+
+
+def _platform() -> str:
+    """What the compiled code's last bits depend on: CPU, C compiler, CasADi version."""
+    compiler = find_compiler()
+    version = ""
+    if compiler is not None:
+        out = subprocess.run([compiler, "--version"], capture_output=True, text=True, check=False)
+        version = out.stdout.splitlines()[0] if out.stdout else ""
+    text = "|".join((cpu_signature(), version, casadi.__version__))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def _settings(preset: str) -> PlannerSettings:
@@ -143,6 +170,7 @@ def _save(
     arms = sorted({c["arm"] for c in calls})
     peers = sorted({p for c in calls for p in c["peers"]})
     meta = {
+        "platform": _platform(),
         "setup": setup,
         "row": row,
         "preset": preset,
@@ -178,6 +206,8 @@ def test_replayed_commands_equal_the_reference(name: str) -> None:
     planners = _planners(meta["setup"], meta["row"], meta["preset"], scenario)
     for planner in planners.values():
         planner.reset()
+    same_platform = meta.get("platform") == _platform()
+    tolerance = TOLERANCE if same_platform else OTHER_PLATFORM_TOLERANCE
     worst, first_bad = 0.0, None
     for k, arm in enumerate(meta["call_arms"]):
         peers = dict(zip(meta["peers"], arrays["peers"][k], strict=True))
@@ -186,10 +216,19 @@ def test_replayed_commands_equal_the_reference(name: str) -> None:
         args = (peers[arm], peers, arrays["goals"][k])
         result = plan(*args, bounds) if bounds is not None else plan(*args)
         gap = float(np.abs(np.asarray(result.velocity) - arrays["commands"][k]).max())
-        if gap > TOLERANCE and first_bad is None:
+        if gap > tolerance and first_bad is None:
             first_bad = (k, arm, gap)
         worst = max(worst, gap)
-    assert first_bad is None, f"first command off the reference: call {first_bad}, worst {worst}"
+    assert first_bad is None, (
+        f"first command off the reference by more than {tolerance} rad/s "
+        f"({'recording' if same_platform else 'another'} platform): call {first_bad}, "
+        f"worst {worst}"
+    )
+    if not same_platform and worst > TOLERANCE:
+        warnings.warn(
+            f"{name}: recorded on another platform; largest command gap {worst:.3g} rad/s",
+            stacklevel=1,
+        )
     # the reference exercises what it was chosen for
     assert len(meta["call_arms"]) > 200
     assert any(v > 0 for v in meta["features"].values()), meta["features"]
